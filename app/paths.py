@@ -1,0 +1,261 @@
+"""What a browser may open: allowed roots, sequence discovery and safe upload extraction.
+
+Nothing typed in the browser reaches a shell or leaves the folders the server was started with.
+A typed path is resolved (symlinks followed) and must lie under one of the allowed roots; an
+upload is written into a fresh folder of the upload root, a zip is unpacked member by member
+after checking every name (no absolute paths, no `..`, no links) and the totals.
+"""
+
+from __future__ import annotations
+
+import os
+import re
+import secrets
+import stat
+import time
+import zipfile
+from collections.abc import Iterable, Sequence
+from dataclasses import dataclass
+from io import BytesIO
+from pathlib import Path, PurePosixPath
+
+from autotrack.errors import InputError
+
+IMAGE_SUFFIXES = frozenset({".jpg", ".jpeg", ".png", ".bmp", ".tif", ".tiff", ".webp"})
+"""Image files a sequence folder may hold (the frame reader's list)."""
+VIDEO_SUFFIXES = frozenset({".mp4", ".avi", ".mov", ".mkv", ".webm", ".m4v", ".mpg", ".mpeg"})
+"""Video containers offered in the sequence list and accepted as uploads."""
+
+
+@dataclass(frozen=True)
+class UploadLimits:
+    """Bounds on what one upload may contain."""
+
+    max_upload_bytes: int = 512 * 1024**2
+    """Largest uploaded file (bytes), video or zip."""
+    max_members: int = 20_000
+    """Most images a zip may hold."""
+    max_extracted_bytes: int = 2 * 1024**3
+    """Largest total size of the images unpacked from one zip (bytes)."""
+
+
+def normalise_roots(roots: Iterable[str | Path]) -> tuple[Path, ...]:
+    """Resolved, existing, de-duplicated folders; a missing one is an InputError."""
+    resolved: list[Path] = []
+    for root in roots:
+        path = Path(root).resolve()
+        if not path.is_dir():
+            raise InputError(f"allowed root {root} is not an existing folder")
+        if path not in resolved:
+            resolved.append(path)
+    return tuple(resolved)
+
+
+def is_under(path: Path, roots: Sequence[Path]) -> bool:
+    """True when the resolved `path` is one of `roots` or lies inside one."""
+    return any(path == root or path.is_relative_to(root) for root in roots)
+
+
+def resolve_user_path(text: str, roots: Sequence[Path]) -> Path:
+    """The existing file or folder a browser user typed, restricted to the allowed roots.
+
+    Relative paths are taken relative to each root in turn. `~` is not expanded: the server's
+    home folder is none of the user's business.
+    """
+    cleaned = text.strip()
+    if not cleaned:
+        raise InputError("type a path to a sequence folder, an image folder or a video")
+    if "\x00" in cleaned:
+        raise InputError("the path contains a NUL character")
+    typed = Path(cleaned)
+    candidates = [typed] if typed.is_absolute() else [root / typed for root in roots]
+    for candidate in candidates:
+        try:
+            resolved = candidate.resolve(strict=True)
+        except (FileNotFoundError, NotADirectoryError, RuntimeError, OSError):
+            continue
+        if is_under(resolved, roots):
+            return resolved
+        raise InputError(f"{cleaned} is outside the folders this server may open")
+    raise InputError(f"{cleaned} does not exist under the folders this server may open")
+
+
+def looks_like_sequence(path: Path) -> bool:
+    """A benchmark sequence folder (img/), a folder of images, or a video file."""
+    if path.is_file():
+        return path.suffix.lower() in VIDEO_SUFFIXES
+    if not path.is_dir():
+        return False
+    if (path / "img").is_dir():
+        return True
+    try:
+        return any(
+            entry.is_file() and Path(entry.name).suffix.lower() in IMAGE_SUFFIXES
+            for entry in os.scandir(path)
+        )
+    except OSError:
+        return False
+
+
+def find_sequences(roots: Sequence[Path], max_depth: int = 4, limit: int = 500) -> list[Path]:
+    """Sequences found under the roots, in sorted order, without entering an `img/` folder.
+
+    Stops after `limit` entries so a huge root cannot stall the GUI.
+    """
+    found: list[Path] = []
+
+    def visit(folder: Path, depth: int) -> None:
+        if len(found) >= limit:
+            return
+        if looks_like_sequence(folder):
+            found.append(folder)
+            return
+        if depth >= max_depth:
+            return
+        try:
+            entries = sorted(os.scandir(folder), key=lambda entry: entry.name)
+        except OSError:
+            return
+        for entry in entries:
+            if entry.name.startswith("."):
+                continue
+            child = Path(entry.path)
+            if entry.is_dir(follow_symlinks=False):
+                visit(child, depth + 1)
+            elif entry.is_file() and child.suffix.lower() in VIDEO_SUFFIXES:
+                found.append(child)
+            if len(found) >= limit:
+                return
+
+    for root in roots:
+        visit(root, 0)
+    return found[:limit]
+
+
+def display_name(path: Path, roots: Sequence[Path]) -> str:
+    """`path` relative to the root that holds it (prefixed by the root's name)."""
+    for root in roots:
+        if path == root:
+            return root.name
+        if path.is_relative_to(root):
+            return f"{root.name}/{path.relative_to(root).as_posix()}"
+    return path.name
+
+
+_SAFE_NAME = re.compile(r"[^A-Za-z0-9._-]+")
+
+
+def safe_file_name(name: str, fallback: str = "upload") -> str:
+    """The last component of `name` reduced to letters, digits, dot, dash and underscore."""
+    base = PurePosixPath(name.replace("\\", "/")).name
+    cleaned = _SAFE_NAME.sub("_", base).strip("._")
+    return cleaned[:120] or fallback
+
+
+def new_upload_folder(upload_root: Path, label: str) -> Path:
+    """A fresh, uniquely named folder under `upload_root`."""
+    upload_root.mkdir(parents=True, exist_ok=True)
+    stamp = time.strftime("%Y%m%d-%H%M%S")
+    folder = upload_root / f"{stamp}_{safe_file_name(label)}_{secrets.token_hex(3)}"
+    folder.mkdir()
+    return folder
+
+
+def _member_problem(info: zipfile.ZipInfo) -> str | None:
+    """Why a zip member must not be extracted, or None when it is safe to consider."""
+    name = info.filename
+    if "\x00" in name:
+        return "a name with a NUL character"
+    posix = PurePosixPath(name.replace("\\", "/"))
+    if posix.is_absolute() or re.match(r"^[A-Za-z]:", name):
+        return f"an absolute path ({name})"
+    if ".." in posix.parts:
+        return f"a path leaving the archive ({name})"
+    mode = info.external_attr >> 16
+    if stat.S_ISLNK(mode):
+        return f"a symbolic link ({name})"
+    return None
+
+
+def extract_image_zip(content: bytes, destination: Path, limits: UploadLimits) -> Path:
+    """Unpack the images of a zip into `destination/img/` and return that folder.
+
+    Every member is checked before anything is written: absolute names, `..` components and
+    symbolic links reject the whole archive. Non-image members (e.g. `__MACOSX/` metadata) are
+    skipped. Images are renamed `000001.ext`, ... in the sorted order of their archive names,
+    so the frame order is the name order and no archive name touches the filesystem. The
+    declared and the actually written sizes are both held to `limits`.
+    """
+    try:
+        archive = zipfile.ZipFile(BytesIO(content))
+    except zipfile.BadZipFile as error:
+        raise InputError(f"the upload is not a readable zip file ({error})") from error
+    with archive:
+        images: list[zipfile.ZipInfo] = []
+        for info in archive.infolist():
+            problem = _member_problem(info)
+            if problem is not None:
+                raise InputError(f"refused the zip: it contains {problem}")
+            if info.is_dir():
+                continue
+            parts = PurePosixPath(info.filename.replace("\\", "/")).parts
+            if any(part.startswith(".") or part == "__MACOSX" for part in parts):
+                continue
+            if PurePosixPath(parts[-1]).suffix.lower() in IMAGE_SUFFIXES:
+                images.append(info)
+        if not images:
+            raise InputError("the zip holds no images (.jpg, .png, .bmp, .tif or .webp)")
+        if len(images) > limits.max_members:
+            raise InputError(
+                f"the zip holds {len(images)} images; the limit is {limits.max_members}"
+            )
+        declared = sum(info.file_size for info in images)
+        if declared > limits.max_extracted_bytes:
+            raise InputError(
+                f"the zip unpacks to {declared / 1e6:.0f} MB; the limit is "
+                f"{limits.max_extracted_bytes / 1e6:.0f} MB"
+            )
+        images.sort(key=lambda info: info.filename)
+        image_folder = destination / "img"
+        image_folder.mkdir(parents=True, exist_ok=False)
+        written = 0
+        for index, info in enumerate(images, start=1):
+            suffix = PurePosixPath(info.filename).suffix.lower()
+            target = image_folder / f"{index:06d}{suffix}"
+            with archive.open(info) as source, open(target, "xb") as sink:
+                while chunk := source.read(1 << 20):
+                    written += len(chunk)
+                    if written > limits.max_extracted_bytes:
+                        raise InputError("the zip unpacks to more than its declared size; refused")
+                    sink.write(chunk)
+    return image_folder
+
+
+def store_upload(file_name: str, content: bytes, upload_root: Path, limits: UploadLimits) -> Path:
+    """Write an uploaded video or zip of images under `upload_root`; return what to open.
+
+    A video is written as-is under a sanitised name; a zip is unpacked by `extract_image_zip`.
+    """
+    if len(content) == 0:
+        raise InputError("the uploaded file is empty")
+    if len(content) > limits.max_upload_bytes:
+        raise InputError(
+            f"the upload is {len(content) / 1e6:.0f} MB; the limit is "
+            f"{limits.max_upload_bytes / 1e6:.0f} MB"
+        )
+    name = safe_file_name(file_name)
+    suffix = Path(name).suffix.lower()
+    if suffix == ".zip":
+        folder = new_upload_folder(upload_root, Path(name).stem)
+        extract_image_zip(content, folder, limits)
+        return folder
+    if suffix in VIDEO_SUFFIXES:
+        folder = new_upload_folder(upload_root, Path(name).stem)
+        target = folder / name
+        with open(target, "xb") as sink:
+            sink.write(content)
+        return target
+    raise InputError(
+        f"cannot use {file_name!r}: upload a video ({', '.join(sorted(VIDEO_SUFFIXES))}) "
+        "or a .zip of images"
+    )

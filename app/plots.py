@@ -1,0 +1,161 @@
+"""Live uPlot charts of the tracker's signals over frames, one series per target.
+
+Frames without a value hold NaN: uPlot skips them when ranging and drawing. Aberrant frames
+are a points-only red series on the peak-score and global-variation charts.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+
+import numpy as np
+import viser
+import viser.uplot
+
+ABERRANT_COLOUR = "#e03131"
+
+
+@dataclass(frozen=True)
+class SignalHistory:
+    """Copies of the per-frame signals, taken by the tracking thread for the display thread."""
+
+    target_ids: tuple[str, ...]
+    colours: tuple[tuple[int, int, int], ...]
+    signals: Mapping[str, Mapping[str, np.ndarray]]
+    """Target id -> signal name (see app.run.SIGNAL_NAMES) -> values over all frames."""
+    frame_seconds: np.ndarray
+    """Tracking time per frame (s), NaN where nothing was tracked."""
+    phi: float
+    """Aberrance threshold on the global variation."""
+    last_frame: int
+    """Last frame with any value (-1: nothing yet)."""
+
+
+def _css(colour: tuple[int, int, int]) -> str:
+    return "#{:02x}{:02x}{:02x}".format(*colour)
+
+
+def _line(label: str, colour: str, dash: tuple[float, ...] | None = None) -> viser.uplot.Series:
+    series = viser.uplot.Series(label=label, stroke=colour, width=1.5)
+    if dash is not None:
+        series["dash"] = dash
+    return series
+
+
+def _markers(label: str) -> viser.uplot.Series:
+    return viser.uplot.Series(
+        label=label,
+        stroke=ABERRANT_COLOUR,
+        width=0,
+        points=viser.uplot.Series_Points(show=True, size=7, fill=ABERRANT_COLOUR),
+    )
+
+
+def _aberrant_values(history: SignalHistory, signal: str, count: int) -> np.ndarray:
+    """The largest `signal` value among targets aberrant on each frame, NaN elsewhere."""
+    marked = np.full(count, np.nan)
+    for target_id in history.target_ids:
+        values = history.signals[target_id]
+        flagged = values["aberrant"][:count] == 1.0
+        candidate = np.where(flagged, values[signal][:count], np.nan)
+        marked = np.fmax(marked, candidate)
+    return marked
+
+
+class SignalPlots:
+    """The four charts of a tab: peak score, global variation vs phi, theta_ref/theta, fps."""
+
+    def __init__(self, gui: viser.GuiApi) -> None:
+        self.gui = gui
+        self._target_ids: tuple[str, ...] | None = None
+        self._handles: list[viser.GuiUplotHandle] = []
+        self._folder = gui.add_folder("Plots", expand_by_default=True)
+
+    def _build(self, history: SignalHistory) -> None:
+        for handle in self._handles:
+            handle.remove()
+        colours = [_css(colour) for colour in history.colours]
+        ids = history.target_ids
+        empty = np.zeros(1)
+        x_series = viser.uplot.Series(label="frame")
+        with self._folder:
+            peak = self.gui.add_uplot(
+                data=(empty, *[empty] * len(ids), empty),
+                series=(
+                    x_series,
+                    *[_line(tid, colour) for tid, colour in zip(ids, colours, strict=True)],
+                    _markers("aberrant"),
+                ),
+                title="Peak score",
+                aspect=2.0,
+            )
+            variation = self.gui.add_uplot(
+                data=(empty, *[empty] * len(ids), empty, empty),
+                series=(
+                    x_series,
+                    *[_line(f"{tid} η", colour) for tid, colour in zip(ids, colours, strict=True)],
+                    _line("φ", "#868e96", dash=(6.0, 4.0)),
+                    _markers("aberrant"),
+                ),
+                title="Global variation η vs threshold φ",
+                aspect=2.0,
+            )
+            theta_series: list[viser.uplot.Series] = []
+            for tid, colour in zip(ids, colours, strict=True):
+                theta_series.append(_line(f"{tid} θref", colour, dash=(4.0, 3.0)))
+                theta_series.append(_line(f"{tid} θ", colour))
+            theta = self.gui.add_uplot(
+                data=(empty, *[empty] * (2 * len(ids))),
+                series=(x_series, *theta_series),
+                title="θ_ref (dashed) and θ",
+                aspect=2.0,
+            )
+            fps = self.gui.add_uplot(
+                data=(empty, empty),
+                series=(x_series, _line("fps", "#1971c2")),
+                title="Tracking speed (frames/s)",
+                aspect=2.5,
+            )
+        self._handles = [peak, variation, theta, fps]
+        self._target_ids = ids
+
+    def update(self, history: SignalHistory) -> None:
+        """Send the latest values (rebuilding the charts when the target list changed)."""
+        if not history.target_ids:
+            for handle in self._handles:
+                handle.remove()
+            self._handles = []
+            self._target_ids = ()
+            return
+        if history.target_ids != self._target_ids:
+            self._build(history)
+        count = max(history.last_frame + 1, 1)
+        frames = np.arange(count, dtype=np.float64)
+        ids = history.target_ids
+
+        def signal(name: str) -> list[np.ndarray]:
+            return [history.signals[tid][name][:count] for tid in ids]
+
+        peak, variation, theta, fps = self._handles
+        peak.data = (frames, *signal("peak_score"), _aberrant_values(history, "peak_score", count))
+        variation.data = (
+            frames,
+            *signal("global_variation"),
+            np.full(count, history.phi),
+            _aberrant_values(history, "global_variation", count),
+        )
+        theta_values: list[np.ndarray] = []
+        for tid in ids:
+            theta_values.append(history.signals[tid]["theta_ref"][:count])
+            theta_values.append(history.signals[tid]["theta"][:count])
+        theta.data = (frames, *theta_values)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            rate = 1.0 / history.frame_seconds[:count]
+        fps.data = (frames, np.where(np.isfinite(rate), rate, np.nan))
+
+    def data_of(self, title_index: int) -> Sequence[np.ndarray] | None:
+        """The data last sent to chart `title_index` (0 peak, 1 variation, 2 theta, 3 fps)."""
+        if not self._handles:
+            return None
+        return self._handles[title_index].data

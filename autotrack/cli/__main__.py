@@ -1,0 +1,4 @@
+import sys
+from autotrack.cli import main
+
+sys.exit(main())

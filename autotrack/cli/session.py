@@ -1,0 +1,160 @@
+"""`autotrack session info|export FILE`: summarise a recorded session or export its tracks/poses."""
+
+from __future__ import annotations
+
+import argparse
+import json
+from collections import Counter
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from autotrack.errors import SessionError
+from autotrack.sessions import (
+    Session,
+    open_session,
+    write_otb_tracks,
+    write_tracks_csv,
+    write_tum_poses,
+)
+
+
+def add_parser(subparsers: argparse._SubParsersAction) -> None:
+    parser = subparsers.add_parser(
+        "session",
+        help="inspect or export a recorded session (.mcap)",
+        description="Inspect or export a session recorded by the app or `autotrack localize "
+        "--session`. Files cut short by a crash are read up to the cut.",
+    )
+    actions = parser.add_subparsers(dest="session_command", required=True)
+
+    info = actions.add_parser(
+        "info", help="summary: frames, targets, poses, duration, whether it was cut short"
+    )
+    info.add_argument("file", type=Path, help="session file (.mcap)")
+    info.add_argument("--json", action="store_true", help="print the summary as JSON")
+    info.set_defaults(func=run_info)
+
+    export = actions.add_parser(
+        "export",
+        help="write OTB-style tracks, a combined CSV and/or TUM poses",
+        description="Export tracks as one OTB-style `<target>.txt` per target (x,y,w,h per frame, "
+        "1-based x and y, NaN where absent), a combined CSV (frame, target, 0-based x,y,w,h, "
+        "score, aberrant) and the valid camera poses as a TUM trajectory for evo "
+        "(timestamp = frame index / fps).",
+    )
+    export.add_argument("file", type=Path, help="session file (.mcap)")
+    export.add_argument("--tracks", type=Path, default=None, help="folder for <target>.txt files")
+    export.add_argument("--poses", type=Path, default=None, help="TUM trajectory file to write")
+    export.add_argument("--csv", type=Path, default=None, help="combined CSV file to write")
+    export.add_argument("--force", action="store_true", help="replace existing output files")
+    export.set_defaults(func=run_export)
+
+
+def session_summary(session: Session) -> dict[str, Any]:
+    """The figures `session info` prints, as plain JSON-able data."""
+    targets = {}
+    for target_id in session.targets:
+        boxes = session.tracks[target_id]
+        present = np.flatnonzero(np.isfinite(boxes).all(axis=1))
+        targets[target_id] = {
+            "frames": int(present.size),
+            "first_frame": int(present[0]) if present.size else None,
+            "last_frame": int(present[-1]) if present.size else None,
+            "aberrant_frames": int(session.aberrant[target_id].sum()),
+            "landmark_id": session.landmark_ids.get(target_id),
+        }
+    poses = session.poses
+    return {
+        "file": str(session.path),
+        "format_version": session.format_version,
+        "package_version": session.metadata.get("package_version"),
+        "created_utc": session.metadata.get("created_utc"),
+        "source": session.metadata.get("source"),
+        "scene_path": session.metadata.get("scene_path") or None,
+        "fps": session.fps,
+        "frames": session.frame_count,
+        "last_frame": int(session.frame_indices[-1]) if len(session.frame_indices) else None,
+        "targets": targets,
+        "poses": {"frames": int(poses.frame_indices.size), "valid": int(poses.valid.sum())},
+        "events": dict(Counter(event.kind for event in session.events)),
+        "embedded_frames": session.image_count,
+        "messages": session.message_count,
+        "duration_s": session.duration_s,
+        "wall_time_span_s": session.wall_time_span_s,
+        "truncated": session.truncated,
+        "bytes_read": session.bytes_read,
+        "file_size": session.file_size,
+    }
+
+
+def _format_summary(summary: dict[str, Any]) -> str:
+    lines = [
+        f"session   {summary['file']}",
+        f"format    version {summary['format_version']}, written by autotrack-studio "
+        f"{summary['package_version']} on {summary['created_utc']}",
+        f"source    {summary['source']}",
+    ]
+    if summary["scene_path"]:
+        lines.append(f"scene     {summary['scene_path']}")
+    last = summary["last_frame"]
+    span = f"frames 0-{last}" if last is not None else "no frames"
+    lines.append(f"frames    {summary['frames']} tracked ({span}) at {summary['fps']:g} fps")
+    lines.append(
+        f"duration  {summary['duration_s']:.2f} s of video, "
+        f"{summary['wall_time_span_s']:.2f} s of recording"
+    )
+    lines.append(f"targets   {len(summary['targets'])}")
+    for target_id, target in summary["targets"].items():
+        extent = (
+            f"frames {target['first_frame']}-{target['last_frame']}"
+            if target["frames"]
+            else "no boxes"
+        )
+        landmark = f", landmark {target['landmark_id']}" if target["landmark_id"] else ""
+        lines.append(
+            f"  {target_id}: {target['frames']} boxes ({extent}), "
+            f"{target['aberrant_frames']} aberrant{landmark}"
+        )
+    poses = summary["poses"]
+    lines.append(f"poses     {poses['valid']} valid of {poses['frames']}")
+    events = ", ".join(f"{count} {kind}" for kind, count in summary["events"].items())
+    lines.append(f"events    {events or 'none'}")
+    if summary["embedded_frames"]:
+        lines.append(f"images    {summary['embedded_frames']} embedded frames")
+    if summary["truncated"]:
+        lines.append(
+            f"complete  NO: cut short (crash or interrupted copy); read {summary['messages']} "
+            f"messages from the first {summary['bytes_read']} of {summary['file_size']} bytes"
+        )
+    else:
+        lines.append(f"complete  yes ({summary['messages']} messages)")
+    return "\n".join(lines)
+
+
+def run_info(args: argparse.Namespace) -> int:
+    summary = session_summary(open_session(args.file))
+    if args.json:
+        print(json.dumps(summary, indent=2))
+    else:
+        print(_format_summary(summary))
+    return 0
+
+
+def run_export(args: argparse.Namespace) -> int:
+    if args.tracks is None and args.poses is None and args.csv is None:
+        raise SessionError("nothing to export: give --tracks DIR, --poses FILE and/or --csv FILE")
+    session = open_session(args.file)
+    if session.truncated:
+        print(f"note: {args.file} was cut short; exporting what was recorded before the cut")
+    if args.tracks is not None:
+        paths = write_otb_tracks(session, args.tracks, overwrite=args.force)
+        print(f"wrote {len(paths)} track file(s) to {args.tracks}")
+    if args.csv is not None:
+        write_tracks_csv(session, args.csv, overwrite=args.force)
+        print(f"wrote {args.csv}")
+    if args.poses is not None:
+        count = write_tum_poses(session, args.poses, overwrite=args.force)
+        print(f"wrote {count} valid pose(s) to {args.poses}")
+    return 0

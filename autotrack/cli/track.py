@@ -1,0 +1,112 @@
+"""`autotrack track SEQUENCE`: run one tracker over a sequence and write its boxes."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+from tqdm import tqdm
+
+from autotrack.datasets import GROUND_TRUTH_FILE, read_boxes, write_boxes
+from autotrack.errors import BoxError, InputError
+from autotrack.evaluation import score_sequence
+from autotrack.frames import open_frames
+from autotrack.params import PRESETS, preset
+
+
+def parse_box(text: str) -> tuple[float, float, float, float]:
+    """'x,y,w,h' -> four floats, with a message naming what is wrong."""
+    fields = [field.strip() for field in text.replace(" ", ",").split(",") if field.strip()]
+    if len(fields) != 4:
+        raise BoxError(f"--init must be four numbers x,y,w,h; got {text!r}")
+    try:
+        x, y, w, h = (float(field) for field in fields)
+    except ValueError as error:
+        raise BoxError(f"--init must be four numbers x,y,w,h; got {text!r}") from error
+    return (x, y, w, h)
+
+
+def add_parser(subparsers: argparse._SubParsersAction) -> None:
+    parser = subparsers.add_parser(
+        "track",
+        help="track one target through a sequence",
+        description=(
+            "Track one target through SEQUENCE (a folder of images, a video file, or a benchmark "
+            "sequence folder with img/ and groundtruth_rect.txt). Boxes are x,y,w,h in the "
+            "benchmarks' 1-based pixel convention, for --init and for the output alike."
+        ),
+    )
+    parser.add_argument("sequence", type=Path, help="folder of images, video, or sequence folder")
+    parser.add_argument(
+        "--init",
+        type=str,
+        default=None,
+        help="initial box x,y,w,h (1-based, as groundtruth_rect.txt); default: its first row",
+    )
+    parser.add_argument("--preset", default="autotrack", choices=sorted(PRESETS))
+    parser.add_argument(
+        "--color-names",
+        "--colour-table",
+        dest="colour_table",
+        type=Path,
+        default=None,
+        help="published Color Names table (.npy/.mat) instead of the built-in colour feature",
+    )
+    parser.add_argument("--out", type=Path, default=None, help="write boxes here (x,y,w,h rows)")
+    parser.add_argument("--quiet", action="store_true", help="no progress bar")
+    parser.set_defaults(func=run)
+
+
+def _ground_truth(sequence: Path) -> np.ndarray | None:
+    path = sequence / GROUND_TRUTH_FILE
+    return read_boxes(path) if sequence.is_dir() and path.is_file() else None
+
+
+def run(args: argparse.Namespace) -> int:
+    from autotrack.tracker import AutoTrack
+
+    if args.colour_table is not None and not args.colour_table.is_file():
+        raise InputError(f"Color Names table not found: {args.colour_table}")
+    frames = open_frames(args.sequence)
+    ground_truth = _ground_truth(args.sequence)
+    if args.init is not None:
+        init_box = np.array(parse_box(args.init)) - np.array([1.0, 1.0, 0.0, 0.0])
+    elif ground_truth is not None:
+        init_box = ground_truth[0]
+    else:
+        raise InputError(
+            f"{args.sequence} has no {GROUND_TRUTH_FILE}: give the initial box with --init x,y,w,h"
+        )
+    tracker = AutoTrack(preset(args.preset, args.colour_table))
+    boxes = np.full((len(frames), 4), np.nan)
+    tracking_seconds = 0.0
+    progress = tqdm(
+        total=len(frames), unit="frame", desc=frames.name, disable=args.quiet or len(frames) < 50
+    )
+    with frames, progress:
+        for index in range(len(frames)):
+            frame = frames.read(index)
+            start = time.perf_counter()
+            result = tracker.init(frame, init_box) if index == 0 else tracker.update(frame)
+            tracking_seconds += time.perf_counter() - start
+            boxes[index] = result.box
+            progress.update()
+    if args.out is not None:
+        args.out.parent.mkdir(parents=True, exist_ok=True)
+        write_boxes(args.out, boxes)
+    fps = len(frames) / tracking_seconds if tracking_seconds > 0 else float("inf")
+    print(f"frames: {len(frames)}  fps: {fps:.1f} (tracking time only)")
+    if ground_truth is not None and len(ground_truth) == len(boxes):
+        score = score_sequence(frames.name, boxes, ground_truth)
+        print(f"precision@20px: {score.precision:.3f}  success AUC: {score.auc:.3f}")
+    elif ground_truth is not None:
+        print(
+            f"ground truth has {len(ground_truth)} rows for {len(boxes)} frames: not scored",
+            file=sys.stderr,
+        )
+    if args.out is not None:
+        print(f"boxes written to {args.out}")
+    return 0

@@ -1,0 +1,390 @@
+"""Felzenszwalb HOG as computed by Piotr Dollar's toolbox `fhog(I, binSize, nOrients, clip)`.
+
+A port of the semantics of the toolbox's gradientMex.cpp (v3.30: `gradMag`, `gradHist` with
+softBin = -1, `hogNormMatrix`, `hogChannels`, `fhog`), which the AutoTrack release calls as
+`fhog(single(patch), 4, 9)`. dlib's fHOG (`pyfhog`) differs and must not be substituted.
+
+Per pixel (only the first (H//cell)*cell rows and (W//cell)*cell columns are used):
+1. Centred differences (one-sided, factor 1, at the image border); with several channels the one
+   with the largest squared magnitude wins (a later channel only if strictly larger).
+2. The orientation in [0, 2 pi) goes to one of 2 * n_orients bins without orientation
+   interpolation; the magnitude / cell^2 is spread bilinearly over the 4 nearest cells, and the
+   border cells are scaled by 8/7 (they miss 1/8 of the interior weight).
+3. Contrast-insensitive bins are the sums of opposite sensitive bins; each cell is normalised by
+   its four 2 x 2 blocks' energies, clipped at `clip`, and summed into 2n + n orientation
+   channels and 4 texture channels; a last, all-zero channel completes the toolbox's 3n + 5.
+
+Deliberate differences: the toolbox takes the magnitude and the unit gradient from SSE
+`rcp`/`rsqrt` approximations (about 12 correct bits, hardware dependent); here they are exact
+float32. Everything else (acos lookup table, float32 bin arithmetic, block energies and the
+order the normaliser border is filled in) follows the C code, so orientation bins agree except
+where the approximation itself moves a gradient across a bin edge.
+"""
+
+from __future__ import annotations
+
+import math
+from functools import lru_cache
+
+import numpy as np
+from numba import njit
+
+from autotrack.errors import InputError
+
+FHOG_TRUNCATION_CHANNELS = 1
+"""The toolbox appends one all-zero truncation channel; trackers drop it."""
+
+_PI = np.float32(3.14159265)  # the toolbox's PI (a float literal)
+_ACOS_STEPS = 10000  # acosTable: a[i] ~= acos(i / 10000)
+_ACOS_PAD = 10
+_ACOS_OFFSET = _ACOS_STEPS + _ACOS_PAD
+_TEXTURE_WEIGHT = np.float32(0.2357)  # ~ 1 / sqrt(18), hogChannels' r
+_HALF = np.float32(0.5)
+_ONE = np.float32(1.0)
+_MINUS_ONE = np.float32(-1.0)
+_BORDER_GAIN = np.float32(8.0) / np.float32(7.0)
+_ZERO_GRADIENT_INVERSE = np.float32(1e10)  # min(rsqrt(0), 1e10) in gradMag
+
+
+def fhog_channels(n_orients: int = 9) -> int:
+    """Channels the toolbox returns: 2n sensitive + n insensitive + 4 texture + 1 zero."""
+    return 3 * n_orients + 5
+
+
+@lru_cache(maxsize=1)
+def acos_table() -> np.ndarray:
+    """The toolbox's acosTable(): float32 acos(i / 10000) for i in [-10010, 10010), read-only.
+
+    Entries below -10000 are pi, above 9999 zero, and values above pi - 1e-6 are clamped to
+    pi - 1e-6 (so that adding pi for negative y-gradients stays below 2 pi). Index with
+    `int(x * 10000) + 10010`.
+    """
+    table = np.empty(2 * _ACOS_OFFSET, dtype=np.float32)
+    steps = np.arange(-_ACOS_STEPS, _ACOS_STEPS, dtype=np.float32) / np.float32(_ACOS_STEPS)
+    table[:_ACOS_PAD] = _PI
+    table[_ACOS_PAD : _ACOS_PAD + 2 * _ACOS_STEPS] = np.arccos(steps.astype(np.float64))
+    table[_ACOS_PAD + 2 * _ACOS_STEPS :] = 0.0
+    limit = _PI - np.float32(1e-6)
+    head = table[: _ACOS_OFFSET + _ACOS_STEPS // 10]
+    head[head > limit] = limit
+    table.flags.writeable = False
+    return table
+
+
+@njit(cache=True, fastmath=False, error_model="numpy")
+def _bin_coordinates(n_pixels, cell):
+    """Per pixel: left/top cell index (-1 before the first centre) and fractional offset.
+
+    Accumulates (i + 0.5) / cell - 0.5 in float32 exactly as gradHist does.
+    """
+    first = np.empty(n_pixels, np.int64)
+    frac = np.empty(n_pixels, np.float32)
+    step = _ONE / np.float32(cell)
+    position = _HALF * step - _HALF
+    for i in range(n_pixels):
+        index = -1 if i < cell // 2 else int(position)
+        first[i] = index
+        frac[i] = position - np.float32(index)
+        position += step
+    return first, frac
+
+
+@njit(cache=True, fastmath=False, error_model="numpy")
+def _planar_float32(image):
+    """(H, W, C) of any real dtype -> C-contiguous float32 (C, H, W), as `single(I)` does."""
+    height, width, channels = image.shape
+    planes = np.empty((channels, height, width), np.float32)
+    if channels == 3:  # the common RGB case, written so that LLVM vectorises the deinterleave
+        flat = image.reshape(height, width * 3)
+        for y in range(height):
+            row = flat[y]
+            red, green, blue = planes[0, y], planes[1, y], planes[2, y]
+            for x in range(width):
+                red[x] = np.float32(row[3 * x])
+                green[x] = np.float32(row[3 * x + 1])
+                blue[x] = np.float32(row[3 * x + 2])
+    else:
+        for y in range(height):
+            for c in range(channels):
+                source = image[y, :, c]
+                target = planes[c, y]
+                for x in range(width):
+                    target[x] = np.float32(source[x])
+    return planes
+
+
+@njit(cache=True, fastmath=False, error_model="numpy")
+def _row_gradients(plane, y, gx, gy):
+    """gradient2 on one row: centred differences, one-sided with factor 1 at the image border.
+
+    Written with offset views so every loop index is a plain range index (vectorisable).
+    """
+    height, width = plane.shape
+    cols = gx.size
+    up = y - 1 if y > 0 else 0
+    down = y + 1 if y < height - 1 else height - 1
+    y_scale = _HALF if (y > 0 and y < height - 1) else _ONE
+    above, below, row = plane[up], plane[down], plane[y]
+    for x in range(cols):
+        gy[x] = (below[x] - above[x]) * y_scale
+    inner = min(cols, width - 1) - 1  # columns 1..inner have both neighbours
+    ahead, behind, centre = row[2 : 2 + inner], row[:inner], gx[1 : 1 + inner]
+    for i in range(inner):
+        centre[i] = (ahead[i] - behind[i]) * _HALF
+    gx[0] = row[1] - row[0]
+    if cols == width:
+        gx[cols - 1] = row[width - 1] - row[width - 2]
+
+
+@njit(cache=True, fastmath=False, error_model="numpy")
+def _gradient_histogram(planes, cell, n_bins, table, hist):
+    """gradMag (full orientation) + gradHist(softBin=-1): bilinear in space, hard in angle.
+
+    `planes` is float32 (C, H, W). Row by row in small vectorisable passes, branch-free where the
+    data decide (random gradient signs would defeat branch prediction).
+    """
+    channels = planes.shape[0]
+    hb, wb = hist.shape[0], hist.shape[1]
+    rows, cols = hb * cell, wb * cell
+    inv_cell2 = _ONE / np.float32(cell) / np.float32(cell)
+    bins_per_radian = np.float32(n_bins) / (np.float32(2.0) * _PI)
+    unit = np.float32(_ACOS_STEPS)
+    zero = np.float32(0.0)
+    x_first, x_frac = _bin_coordinates(cols, cell)
+    y_first, y_frac = _bin_coordinates(rows, cell)
+    gx = np.empty(cols, np.float32)
+    gy = np.empty(cols, np.float32)
+    squared = np.empty(cols, np.float32)
+    channel_gx = np.empty(cols, np.float32)
+    channel_gy = np.empty(cols, np.float32)
+    table_index = np.empty(cols, np.uint32)
+    angle_offset = np.empty(cols, np.float32)
+    weight = np.empty(cols, np.float32)
+    orient = np.empty(cols, np.int64)
+    for y in range(rows):
+        _row_gradients(planes[0], y, gx, gy)
+        for x in range(cols):
+            squared[x] = gx[x] * gx[x] + gy[x] * gy[x]
+        for c in range(1, channels):  # keep the channel of largest magnitude (strictly larger)
+            _row_gradients(planes[c], y, channel_gx, channel_gy)
+            for x in range(cols):  # unconditional stores of selects: this form vectorises
+                cx, cy, best = channel_gx[x], channel_gy[x], squared[x]
+                candidate = cx * cx + cy * cy
+                larger = candidate > best
+                squared[x] = candidate if larger else best
+                gx[x] = cx if larger else gx[x]
+                gy[x] = cy if larger else gy[x]
+        for x in range(cols):
+            magnitude = np.float32(math.sqrt(squared[x]))
+            inverse = min(_ONE / magnitude, _ZERO_GRADIENT_INVERSE)
+            negative = gy[x] < zero
+            # acos of the unit x-gradient, sign-flipped for negative y, via the toolbox's table;
+            # adding pi below maps the angle to [0, 2 pi). (atan2 would differ at bin edges only.)
+            sign = _MINUS_ONE if negative else _ONE
+            table_index[x] = np.int32(gx[x] * inverse * unit * sign) + _ACOS_OFFSET
+            angle_offset[x] = _PI if negative else zero
+            weight[x] = magnitude * inv_cell2
+        for x in range(cols):
+            angle = table[table_index[x]] + angle_offset[x]
+            bin_index = int(angle * bins_per_radian + _HALF)
+            orient[x] = 0 if bin_index >= n_bins else bin_index
+        y0 = y_first[y]
+        yd = y_frac[y]
+        for x in range(cols):
+            m = weight[x]
+            o = orient[x]
+            x0 = x_first[x]
+            xd = x_frac[x]
+            xyd = xd * yd
+            w00 = _ONE - xd - yd + xyd
+            w10 = yd - xyd
+            w01 = xd - xyd
+            w11 = xyd
+            has_left = x0 >= 0
+            has_right = x0 < wb - 1
+            if y0 < 0:  # leading rows: only the cell row below the first centre line
+                if has_left:
+                    hist[0, x0, o] += w10 * m
+                if has_right:
+                    hist[0, x0 + 1, o] += w11 * m
+            elif y0 < hb - 1:
+                if has_left:
+                    hist[y0, x0, o] += w00 * m
+                    hist[y0 + 1, x0, o] += w10 * m
+                if has_right:
+                    hist[y0, x0 + 1, o] += w01 * m
+                    hist[y0 + 1, x0 + 1, o] += w11 * m
+            else:  # final rows: no cell row below
+                if has_left:
+                    hist[y0, x0, o] += w00 * m
+                if has_right:
+                    hist[y0, x0 + 1, o] += w01 * m
+    # Border cells only receive 7/8 of an interior cell's weight (gradHist, softBin odd).
+    for o in range(n_bins):
+        for y in range(hb):
+            hist[y, 0, o] *= _BORDER_GAIN
+        for x in range(wb):
+            hist[0, x, o] *= _BORDER_GAIN
+        for y in range(hb):
+            hist[y, wb - 1, o] *= _BORDER_GAIN
+        for x in range(wb):
+            hist[hb - 1, x, o] *= _BORDER_GAIN
+
+
+@njit(cache=True, fastmath=False, error_model="numpy")
+def _block_normalisers(insensitive, cell):
+    """hogNormMatrix: 1/sqrt(2x2 block energy + eps) on an (hb+1, wb+1) grid, border copied.
+
+    Entry [i+1, j+1] belongs to the block whose top-left cell is (i, j). The border is filled in
+    the C code's order, which matters only when hb or wb is 1 (then raw energies leak through,
+    as in the toolbox).
+    """
+    hb, wb, n_orients = insensitive.shape
+    norm = np.zeros((hb + 1, wb + 1), np.float32)
+    for o in range(n_orients):
+        for y in range(hb):
+            for x in range(wb):
+                value = insensitive[y, x, o]
+                norm[y + 1, x + 1] += value * value
+    eps = np.float32(1e-4) / np.float32(4.0)
+    for _ in range(4):
+        eps = eps / np.float32(cell)
+    for x in range(wb - 1):
+        for y in range(hb - 1):
+            total = (
+                norm[y + 1, x + 1] + norm[y + 2, x + 1] + norm[y + 1, x + 2] + norm[y + 2, x + 2]
+            ) + eps
+            norm[y + 1, x + 1] = _ONE / np.float32(math.sqrt(total))
+    last_x, last_y = wb, hb
+    norm[0, 0] = norm[1, 1]
+    for y in range(hb + 1):
+        norm[y, 0] = norm[y, 1]
+    norm[last_y, 0] = norm[last_y - 1, 1]
+    norm[0, last_x] = norm[1, last_x - 1]
+    for y in range(hb + 1):
+        norm[y, last_x] = norm[y, last_x - 1]
+    norm[last_y, last_x] = norm[last_y - 1, last_x - 1]
+    for x in range(wb + 1):
+        norm[0, x] = norm[1, x]
+    for x in range(wb + 1):
+        norm[last_y, x] = norm[last_y - 1, x]
+    return norm
+
+
+@njit(cache=True, fastmath=False, error_model="numpy")
+def _fhog_into(image, cell, n_orients, clip, table, out):
+    """fhog of one (H, W, C) image into `out` (H//cell, W//cell, 3n+5), which must be zeroed."""
+    hb, wb = out.shape[0], out.shape[1]
+    if hb == 0 or wb == 0:
+        return
+    n_bins = 2 * n_orients
+    sensitive = np.zeros((hb, wb, n_bins), np.float32)
+    _gradient_histogram(_planar_float32(image), cell, n_bins, table, sensitive)
+    insensitive = np.empty((hb, wb, n_orients), np.float32)
+    for y in range(hb):
+        for x in range(wb):
+            for o in range(n_orients):
+                insensitive[y, x, o] = sensitive[y, x, o] + sensitive[y, x, o + n_orients]
+    norm = _block_normalisers(insensitive, cell)
+    texture_first = 3 * n_orients
+    for y in range(hb):
+        for x in range(wb):
+            # The four blocks containing cell (y, x): hogChannels' GETT(0), (1), (hb1), (hb1+1).
+            n0 = norm[y + 1, x + 1]
+            n1 = norm[y, x + 1]
+            n2 = norm[y + 1, x]
+            n3 = norm[y, x]
+            for o in range(n_bins):
+                r = sensitive[y, x, o]
+                t0 = min(r * n0, clip)
+                t1 = min(r * n1, clip)
+                t2 = min(r * n2, clip)
+                t3 = min(r * n3, clip)
+                out[y, x, o] = t0 * _HALF + t1 * _HALF + t2 * _HALF + t3 * _HALF
+                out[y, x, texture_first] += t0 * _TEXTURE_WEIGHT
+                out[y, x, texture_first + 1] += t1 * _TEXTURE_WEIGHT
+                out[y, x, texture_first + 2] += t2 * _TEXTURE_WEIGHT
+                out[y, x, texture_first + 3] += t3 * _TEXTURE_WEIGHT
+            for o in range(n_orients):
+                r = insensitive[y, x, o]
+                t0 = min(r * n0, clip)
+                t1 = min(r * n1, clip)
+                t2 = min(r * n2, clip)
+                t3 = min(r * n3, clip)
+                out[y, x, n_bins + o] = t0 * _HALF + t1 * _HALF + t2 * _HALF + t3 * _HALF
+
+
+@njit(cache=True, fastmath=False, error_model="numpy")
+def _fhog_batch_into(images, cell, n_orients, clip, table, out):
+    for i in range(images.shape[0]):
+        _fhog_into(images[i], cell, n_orients, clip, table, out[i])
+
+
+def _as_kernel_input(images: np.ndarray, image_axes: int) -> np.ndarray:
+    """C-contiguous uint8 or float32 with an explicit channel axis (the kernels' two dtypes)."""
+    array = np.asarray(images)
+    if array.dtype != np.uint8:
+        if not (np.issubdtype(array.dtype, np.number) or array.dtype == np.bool_):
+            raise InputError(f"fhog needs a numeric image, got dtype {array.dtype}")
+        if np.iscomplexobj(array):
+            raise InputError("fhog needs a real-valued image, got a complex array")
+        array = array.astype(np.float32, copy=False)
+    if array.ndim == image_axes:
+        array = array[..., None]
+    if array.ndim != image_axes + 1 or array.shape[-1] < 1:
+        raise InputError(
+            f"fhog needs images of shape H x W or H x W x C, got array shape {np.shape(images)}"
+        )
+    height, width = array.shape[-3], array.shape[-2]
+    if height < 2 or width < 2:
+        raise InputError(f"fhog needs an image of at least 2 x 2 pixels, got {height} x {width}")
+    return np.ascontiguousarray(array)
+
+
+def _check_settings(cell_size: int, n_orients: int, clip: float) -> None:
+    if int(cell_size) != cell_size or cell_size < 1:
+        raise InputError(f"fhog cell_size must be a positive integer, got {cell_size}")
+    if int(n_orients) != n_orients or n_orients < 1:
+        raise InputError(f"fhog n_orients must be a positive integer, got {n_orients}")
+    if not (math.isfinite(clip) and clip > 0):
+        raise InputError(f"fhog clip must be a positive number, got {clip}")
+
+
+def fhog(
+    image: np.ndarray, cell_size: int = 4, n_orients: int = 9, clip: float = 0.2
+) -> np.ndarray:
+    """Piotr Dollar's `fhog(single(image), cell_size, n_orients, clip)`.
+
+    `image` is H x W or H x W x C of any real dtype, used as float32 on its own scale (0..255 for
+    8-bit images; do not divide by 255). Returns float32 (H//cell, W//cell, 3n+5) in the
+    toolbox's channel order: 2n contrast-sensitive orientations, n contrast-insensitive ones, 4
+    texture (block energy) channels and one all-zero channel that callers drop.
+    """
+    _check_settings(cell_size, n_orients, clip)
+    pixels = _as_kernel_input(image, 2)
+    height, width = pixels.shape[:2]
+    out = np.zeros(
+        (height // cell_size, width // cell_size, fhog_channels(n_orients)), dtype=np.float32
+    )
+    _fhog_into(pixels, int(cell_size), int(n_orients), np.float32(clip), acos_table(), out)
+    return out
+
+
+def fhog_batch(
+    images: np.ndarray, cell_size: int = 4, n_orients: int = 9, clip: float = 0.2
+) -> np.ndarray:
+    """`fhog` of each image of an (N, H, W) or (N, H, W, C) stack -> (N, H//cell, W//cell, 3n+5)."""
+    _check_settings(cell_size, n_orients, clip)
+    stack = np.asarray(images)
+    if stack.ndim not in (3, 4):
+        raise InputError(
+            f"fhog_batch needs a stack of shape N x H x W or N x H x W x C, got {stack.shape}"
+        )
+    pixels = _as_kernel_input(stack, 3)
+    count, height, width = pixels.shape[:3]
+    out = np.zeros(
+        (count, height // cell_size, width // cell_size, fhog_channels(n_orients)),
+        dtype=np.float32,
+    )
+    _fhog_batch_into(pixels, int(cell_size), int(n_orients), np.float32(clip), acos_table(), out)
+    return out

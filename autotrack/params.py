@@ -1,0 +1,129 @@
+"""Tracker parameters: the published AutoTrack defaults and the paper's ablation presets."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, replace
+from pathlib import Path
+from typing import Literal
+
+ColourFeature = Literal["lab11", "table", "none"]
+ThetaUpdate = Literal["release", "paper", "reference"]
+
+
+@dataclass(frozen=True)
+class TrackerParams:
+    """AutoTrack parameters. Defaults are the authors' released settings (run_AutoTrack.m)."""
+
+    # Features
+    cell_size: int = 4
+    """Feature cell size (pixels per cell side)."""
+    use_grey: bool = True
+    """Grey channel: (grey / 255 - 0.5) averaged over each cell. 1 channel."""
+    use_fhog: bool = True
+    """Felzenszwalb HOG, 9 orientations, 31 channels."""
+    colour_feature: ColourFeature = "lab11"
+    """Colour feature for colour frames: our CIELAB soft colour-term assignment ('lab11', the
+    default), the published Color Names table loaded from `colour_table_path` ('table'), or none."""
+    colour_table_path: str | None = None
+    """Path of a 32768 x 10 Color Names table (.npy or .mat), used when colour_feature='table'."""
+
+    # Search region
+    search_area_scale: float = 5.0
+    """Side of the square search region = sqrt(w * h * search_area_scale)."""
+    min_image_sample_size: float = 150.0**2
+    """Smallest search-region area (pixels^2) after the fixed resampling of frame 1."""
+    max_image_sample_size: float = 200.0**2
+    """Largest search-region area (pixels^2) after the fixed resampling of frame 1."""
+    output_sigma_factor: float = 0.06
+    """Gaussian label sigma = sqrt(prod(floor(base_target_sz / cell))) * this, in cells."""
+
+    # Detection
+    newton_iterations: int = 5
+    """Newton iterations refining the sub-pixel peak of the response (Fourier series)."""
+
+    # ADMM (paper eqs. 8-14)
+    admm_iterations: int = 4
+    """ADMM iterations per frame."""
+    admm_lambda: float = 1.0
+    """Weight of the spatial regularisation term (lambda in the h-step)."""
+    gamma_init: float = 1.0
+    """Initial ADMM penalty gamma."""
+    gamma_step: float = 10.0
+    """Penalty growth per iteration (beta)."""
+    gamma_max: float = 10000.0
+    """Largest ADMM penalty."""
+
+    # Spatial regularisation (ASR, eqs. 2-3)
+    reg_window_max: float = 1e5
+    """Base window value outside the target region."""
+    reg_window_min: float = 1e-3
+    """Base window value inside the target region."""
+    adaptive_spatial: bool = True
+    """ASR: replace the target-region window by delta * log(local variation + 1) (eq. 3)."""
+    delta: float = 0.2
+    """Weight of the local response variation in the spatial window (eq. 3)."""
+
+    # Temporal regularisation (ATR, eqs. 4 and 13)
+    adaptive_temporal: bool = True
+    """ATR: theta from the global response variation, and the aberrance stop."""
+    zeta: float = 13.0
+    """Temporal reference numerator zeta (eq. 4); also theta in frame 2."""
+    nu: float = 0.2
+    """nu on the 1e-4-scaled global variation (release form; = 2e-5 on the unscaled norm)."""
+    phi: float = 0.3
+    """Aberrance threshold on the 1e-4-scaled global variation (= 3000 unscaled)."""
+    fixed_theta: float = 15.0
+    """Temporal penalty when ATR is off (STRCF's value)."""
+    theta_update: ThetaUpdate = "release"
+    """In-ADMM theta re-estimation (eq. 13): 'release' (last channel, spectral norm, skipped on the
+    last iteration), 'paper' (all channels, Frobenius), 'reference' (theta = theta_ref)."""
+
+    # Scale filter (DSST)
+    num_scales: int = 33
+    """Number of scales of the 1-D scale filter."""
+    scale_step: float = 1.03
+    """Ratio between neighbouring scales."""
+    scale_sigma_factor: float = 0.5
+    """Scale label sigma = sqrt(num_scales) * this."""
+    scale_lambda: float = 1e-4
+    """Regulariser of the scale filter."""
+    scale_learning_rate: float = 0.025
+    """Running-average rate of the scale filter."""
+    scale_model_max_area: float = 32.0 * 16.0
+    """Largest area (pixels^2) of a resampled scale sample."""
+
+    @property
+    def name(self) -> str:
+        """Short label of the regularisation variant (for tables)."""
+        if self.adaptive_spatial and self.adaptive_temporal:
+            return "autotrack"
+        if self.adaptive_spatial:
+            return "strcf+asr"
+        if self.adaptive_temporal:
+            return "strcf+atr"
+        return "strcf"
+
+    def with_colour_table(self, path: str | Path | None) -> TrackerParams:
+        """The same parameters with the published Color Names table loaded from `path`."""
+        if path is None:
+            return self
+        return replace(self, colour_feature="table", colour_table_path=str(path))
+
+
+PRESETS: dict[str, TrackerParams] = {
+    "autotrack": TrackerParams(),
+    "strcf": TrackerParams(adaptive_spatial=False, adaptive_temporal=False),
+    "strcf+asr": TrackerParams(adaptive_spatial=True, adaptive_temporal=False),
+    "strcf+atr": TrackerParams(adaptive_spatial=False, adaptive_temporal=True),
+}
+"""The paper's ablation (Table 2): STRCF baseline, +ASR, +ATR, and the full AutoTrack."""
+
+
+def preset(name: str, colour_table: str | Path | None = None) -> TrackerParams:
+    """Parameters of a named preset, optionally with the published Color Names table."""
+    key = name.strip().lower()
+    if key not in PRESETS:
+        from autotrack.errors import InputError
+
+        raise InputError(f"unknown preset {name!r}; choose one of {', '.join(PRESETS)}")
+    return PRESETS[key].with_colour_table(colour_table)

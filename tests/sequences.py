@@ -1,0 +1,78 @@
+"""Sequences the tests generate: a textured target moving and scaling over clutter."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import cv2
+import numpy as np
+
+
+@dataclass(frozen=True)
+class GeneratedSequence:
+    frames: list[np.ndarray]
+    """RGB uint8 frames."""
+    boxes: np.ndarray
+    """(N, 4) ground-truth boxes, 0-based x, y, w, h."""
+
+
+def _clutter(rng: np.random.Generator, height: int, width: int) -> np.ndarray:
+    noise = rng.uniform(0, 255, size=(height // 8, width // 8, 3)).astype(np.float32)
+    coarse = cv2.resize(noise, (width, height), interpolation=cv2.INTER_CUBIC)
+    fine = rng.normal(0, 12, size=(height, width, 3)).astype(np.float32)
+    return np.clip(0.6 * coarse + 40 + fine, 0, 255)
+
+
+def _target_texture(rng: np.random.Generator, size: int) -> np.ndarray:
+    texture = np.zeros((size, size, 3), dtype=np.float32)
+    texture[:] = (200, 40, 40)
+    for _ in range(14):
+        centre = tuple(int(v) for v in rng.integers(0, size, size=2))
+        radius = int(rng.integers(size // 10, size // 4))
+        colour = tuple(float(v) for v in rng.integers(0, 255, size=3))
+        cv2.circle(texture, centre, radius, colour, thickness=-1)
+    cv2.rectangle(texture, (0, 0), (size - 1, size - 1), (250, 250, 30), thickness=3)
+    return texture
+
+
+def moving_target_sequence(
+    num_frames: int = 60,
+    size_hw: tuple[int, int] = (240, 320),
+    target_size: int = 40,
+    final_scale: float = 1.3,
+    occlusion: tuple[int, int] | None = None,
+    seed: int = 7,
+) -> GeneratedSequence:
+    """A target moving on a smooth path and growing to `final_scale` over static clutter.
+
+    With `occlusion=(first, last)`, those frames show a flat grey block over the whole search
+    region around the target (a full occlusion).
+    """
+    rng = np.random.default_rng(seed)
+    height, width = size_hw
+    background = _clutter(rng, height, width)
+    texture = _target_texture(rng, 64)
+    frames, boxes = [], []
+    for index in range(num_frames):
+        phase = index / max(num_frames - 1, 1)
+        scale = 1.0 + (final_scale - 1.0) * phase
+        side = target_size * scale
+        cx = width * 0.3 + width * 0.4 * phase + 12 * np.sin(4 * np.pi * phase)
+        cy = height * 0.5 + height * 0.15 * np.sin(2 * np.pi * phase)
+        zoom = side / texture.shape[0]
+        warp = np.array(
+            [[zoom, 0, cx - side / 2 - 0.5 + zoom / 2], [0, zoom, cy - side / 2 - 0.5 + zoom / 2]],
+            dtype=np.float64,
+        )
+        layer = cv2.warpAffine(texture, warp, (width, height), flags=cv2.INTER_LINEAR)
+        mask = cv2.warpAffine(
+            np.ones(texture.shape[:2], np.float32), warp, (width, height), flags=cv2.INTER_LINEAR
+        )[:, :, None]
+        frame = background * (1 - mask) + layer * mask
+        if occlusion is not None and occlusion[0] <= index <= occlusion[1]:
+            half = int(side * 3)
+            top, left = int(cy) - half, int(cx) - half
+            frame[max(top, 0) : top + 2 * half, max(left, 0) : left + 2 * half] = 128.0
+        frames.append(np.clip(frame, 0, 255).astype(np.uint8))
+        boxes.append((cx - side / 2, cy - side / 2, side, side))
+    return GeneratedSequence(frames=frames, boxes=np.array(boxes))

@@ -1,0 +1,602 @@
+"""The viser app without a browser: paths, uploads, canvas mapping, and a tab driven through its
+GUI callbacks (load the demo, draw boxes by rect-select events, play, correct, export)."""
+
+from __future__ import annotations
+
+import io
+import json
+import socket
+import stat
+import time
+import zipfile
+from pathlib import Path
+
+import cv2
+import numpy as np
+import pytest
+import viser
+
+from app.canvas import (
+    TargetDrawing,
+    colour_map,
+    draw_overlays,
+    fit_letterbox,
+    letterbox_image,
+    peak_position,
+)
+from app.paths import (
+    UploadLimits,
+    extract_image_zip,
+    find_sequences,
+    resolve_user_path,
+    store_upload,
+)
+from autotrack.errors import InputError
+from autotrack.result import TrackResult
+
+REPO = Path(__file__).resolve().parents[1]
+SHARED_SEQUENCES = REPO / ".." / "shared" / "data" / "sequences"
+
+
+def _jpeg(seed: int, size: tuple[int, int] = (48, 32)) -> bytes:
+    rng = np.random.default_rng(seed)
+    image = rng.integers(0, 255, (size[1], size[0], 3), dtype=np.uint8)
+    ok, encoded = cv2.imencode(".jpg", image)
+    assert ok
+    return encoded.tobytes()
+
+
+def _zip(members: dict[str, bytes], symlinks: tuple[str, ...] = ()) -> bytes:
+    buffer = io.BytesIO()
+    with zipfile.ZipFile(buffer, "w") as archive:
+        for name, content in members.items():
+            archive.writestr(name, content)
+        for name in symlinks:
+            info = zipfile.ZipInfo(name)
+            info.external_attr = (stat.S_IFLNK | 0o777) << 16
+            archive.writestr(info, "/etc/passwd")
+    return buffer.getvalue()
+
+
+# -- paths and uploads --------------------------------------------------------------------------
+
+
+def test_typed_path_must_stay_under_allowed_roots(tmp_path: Path) -> None:
+    root = tmp_path / "root"
+    (root / "seq" / "img").mkdir(parents=True)
+    outside = tmp_path / "outside"
+    outside.mkdir()
+    (root / "escape").symlink_to(outside)
+    roots = (root.resolve(),)
+
+    assert resolve_user_path("seq", roots) == (root / "seq").resolve()
+    assert resolve_user_path(str(root / "seq"), roots) == (root / "seq").resolve()
+    with pytest.raises(InputError, match="outside"):
+        resolve_user_path(str(outside), roots)
+    with pytest.raises(InputError, match="outside"):
+        resolve_user_path("seq/../../outside", roots)
+    with pytest.raises(InputError, match="outside"):
+        resolve_user_path("escape", roots)  # a symlink leading out counts as outside
+    with pytest.raises(InputError, match="does not exist"):
+        resolve_user_path("missing", roots)
+    with pytest.raises(InputError, match="does not exist"):
+        resolve_user_path("~", roots)  # no home-folder expansion
+
+
+def test_sequence_list_finds_benchmark_folders_image_folders_and_videos(tmp_path: Path) -> None:
+    (tmp_path / "bench" / "seqA" / "img").mkdir(parents=True)
+    (tmp_path / "bench" / "seqA" / "img" / "0001.jpg").write_bytes(_jpeg(1))
+    (tmp_path / "frames").mkdir()
+    (tmp_path / "frames" / "a.png").write_bytes(b"x")
+    (tmp_path / "clips").mkdir()
+    (tmp_path / "clips" / "flight.mp4").write_bytes(b"x")
+    (tmp_path / "empty").mkdir()
+
+    found = find_sequences((tmp_path,))
+
+    assert found == [
+        tmp_path / "bench" / "seqA",
+        tmp_path / "clips" / "flight.mp4",
+        tmp_path / "frames",
+    ]
+
+
+def test_shared_sequences_are_listed() -> None:
+    if not SHARED_SEQUENCES.is_dir():
+        pytest.skip("../shared/data/sequences is not present")
+    found = find_sequences((SHARED_SEQUENCES.resolve(),))
+    names = {path.name for path in found}
+    assert {"boat5", "Crossing", "S1301", "bag"} <= names
+
+
+def test_zip_upload_is_unpacked_in_name_order_with_safe_names(tmp_path: Path) -> None:
+    content = _zip(
+        {
+            "flight/frame_0002.jpg": _jpeg(2),
+            "flight/frame_0001.jpg": _jpeg(1),
+            "flight/notes.txt": b"ignored",
+            "__MACOSX/flight/._frame_0001.jpg": b"junk",
+        }
+    )
+    folder = store_upload("my flight.zip", content, tmp_path / "uploads", UploadLimits())
+
+    images = sorted((folder / "img").iterdir())
+    assert [path.name for path in images] == ["000001.jpg", "000002.jpg"]
+    assert images[0].read_bytes() == _jpeg(1)
+    assert folder.parent == tmp_path / "uploads"
+
+
+@pytest.mark.parametrize(
+    ("members", "symlinks", "message"),
+    [
+        ({"../evil.jpg": b"x"}, (), "leaving the archive"),
+        ({"/abs/evil.jpg": b"x"}, (), "absolute path"),
+        ({"ok.jpg": b"x"}, ("link.jpg",), "symbolic link"),
+        ({"readme.txt": b"x"}, (), "no images"),
+    ],
+)
+def test_unsafe_or_empty_zips_are_refused_before_writing(
+    tmp_path: Path, members: dict[str, bytes], symlinks: tuple[str, ...], message: str
+) -> None:
+    destination = tmp_path / "dest"
+    destination.mkdir()
+    with pytest.raises(InputError, match=message):
+        extract_image_zip(_zip(members, symlinks), destination, UploadLimits())
+    assert list(destination.iterdir()) == []
+
+
+def test_upload_limits_on_size_count_and_unpacked_bytes(tmp_path: Path) -> None:
+    many = _zip({f"{i:03d}.jpg": _jpeg(i) for i in range(5)})
+    with pytest.raises(InputError, match="limit is 4"):
+        store_upload("a.zip", many, tmp_path, UploadLimits(max_members=4))
+    with pytest.raises(InputError, match="the upload is"):
+        store_upload("a.zip", many, tmp_path, UploadLimits(max_upload_bytes=100))
+    bomb = _zip({"big.png": bytes(200_000)})
+    with pytest.raises(InputError, match="unpacks to"):
+        store_upload("a.zip", bomb, tmp_path, UploadLimits(max_extracted_bytes=100_000))
+    with pytest.raises(InputError, match="upload a video"):
+        store_upload("script.sh", b"rm -rf /", tmp_path, UploadLimits())
+
+
+def test_video_upload_keeps_a_sanitised_name(tmp_path: Path) -> None:
+    target = store_upload("../../a b;rm.mp4", b"data", tmp_path, UploadLimits())
+    assert target.name == "a_b_rm.mp4"
+    assert target.parent.parent == tmp_path
+    assert target.read_bytes() == b"data"
+
+
+# -- canvas mapping and overlays ----------------------------------------------------------------
+
+
+@pytest.mark.parametrize("canvas", [(1600, 700), (900, 1000), (1280, 720), (333, 517)])
+def test_rect_select_maps_back_to_frame_pixels(canvas: tuple[int, int]) -> None:
+    letterbox = fit_letterbox((1280, 720), canvas)
+    box = (100.0, 50.0, 300.0, 200.0)
+    corner_a = letterbox.frame_to_screen(box[0], box[1])
+    corner_b = letterbox.frame_to_screen(box[0] + box[2], box[1] + box[3])
+
+    mapped = letterbox.rect_to_box(corner_b, corner_a)  # drag direction does not matter
+
+    assert mapped is not None
+    np.testing.assert_allclose(mapped, box, atol=1e-6)
+    # The padded image has the canvas's aspect to within one pixel of rounding.
+    assert abs(letterbox.padded_width / letterbox.padded_height - canvas[0] / canvas[1]) < (
+        1.0 / min(letterbox.padded_height, letterbox.padded_width) * 2
+    )
+
+
+def test_letterboxed_image_puts_the_frame_where_the_mapping_says() -> None:
+    frame = np.zeros((72, 128, 3), np.uint8)
+    frame[10:20, 30:50] = 255
+    letterbox = fit_letterbox((128, 72), (400, 400))
+    image = letterbox_image(frame, letterbox, max_width=10_000)
+
+    assert image.shape[:2] == (letterbox.padded_height, letterbox.padded_width)
+    rows, cols = np.nonzero(image[:, :, 0])
+    u0, v0 = cols.min() / image.shape[1], rows.min() / image.shape[0]
+    assert letterbox.screen_to_frame(u0, v0) == pytest.approx((30.0, 10.0))
+
+
+def test_drags_off_the_frame_are_clipped_or_rejected() -> None:
+    letterbox = fit_letterbox((1280, 720), (1280, 1280))
+    assert letterbox.rect_to_box((0.0, 0.0), (1.0, 0.05)) is None  # only the black bar
+    clipped = letterbox.rect_to_box((0.0, 0.0), (0.5, 0.5))
+    assert clipped is not None
+    assert clipped[0] == 0.0 and clipped[1] == 0.0
+
+
+def _result(map_values: np.ndarray) -> TrackResult:
+    return TrackResult(
+        frame_index=3,
+        box=(40.0, 30.0, 20.0, 10.0),
+        peak_score=0.8,
+        response_map=map_values,
+        local_variation=map_values * 0.5,
+        global_variation=0.1,
+        theta_ref=13.0,
+        theta=12.0,
+        aberrant=True,
+        scale_factor=1.0,
+        search_box=(20.0, 15.0, 50.0, 50.0),
+    )
+
+
+def test_overlay_draws_the_map_inside_the_search_region_only() -> None:
+    values = np.zeros((25, 25), np.float32)
+    values[5, 20] = 1.0
+    result = _result(values)
+    frame = np.full((120, 160, 3), 128, np.uint8)
+    drawing = TargetDrawing(label="T1", colour=(255, 0, 0), box=result.box, result=result)
+
+    plain = draw_overlays(frame, [drawing], "none")
+    mapped = draw_overlays(frame, [drawing], "response")
+
+    changed = np.any(mapped != plain, axis=2)
+    rows, cols = np.nonzero(changed)
+    assert rows.min() >= 15 and rows.max() < 65 and cols.min() >= 20 and cols.max() < 70
+    assert np.array_equal(frame, np.full((120, 160, 3), 128, np.uint8))  # input untouched
+    # The peak lies in cell (5, 20) of a 50-px search region on a 25-cell map.
+    assert peak_position(result) == pytest.approx((20.0 + 20.5 * 2.0, 15.0 + 5.5 * 2.0))
+
+
+def test_colour_map_spans_the_jet_range() -> None:
+    image = colour_map(np.linspace(0, 1, 256, dtype=np.float32).reshape(16, 16))
+    assert image.shape == (16, 16, 3)
+    assert tuple(image[0, 0]) != tuple(image[-1, -1])
+    assert image[-1, -1, 0] > image[-1, -1, 2]  # hot end is red (RGB)
+
+
+# -- a tab driven through its callbacks ---------------------------------------------------------
+
+DEMO = REPO / "static" / "demo"
+
+
+class RecordingChannel:
+    """Stands in for a browser: records notifications and downloads, reports a canvas size."""
+
+    def __init__(self, canvas: tuple[int, int] = (1000, 700)) -> None:
+        self.canvas = canvas
+        self.notes: list[tuple[str, bool]] = []
+        self.downloads: list[tuple[str, bytes]] = []
+        self.camera_moves = 0
+
+    def notify(self, title: str, body: str, *, error: bool = False) -> None:
+        self.notes.append((body, error))
+
+    def download(self, file_name: str, content: bytes) -> None:
+        self.downloads.append((file_name, content))
+
+    def canvas_size(self) -> tuple[int, int]:
+        return self.canvas
+
+    def on_canvas_change(self, callback) -> None:
+        self.changed = callback
+
+    def look_at(self, position, target, up) -> None:
+        self.camera_moves += 1
+
+
+def _free_port() -> int:
+    with socket.socket() as probe:
+        probe.bind(("127.0.0.1", 0))
+        return probe.getsockname()[1]
+
+
+@pytest.fixture
+def studio(tmp_path: Path):
+    if not (DEMO / "img").is_dir():
+        pytest.skip("static/demo is missing (generated by `autotrack synth`, see its README)")
+    from app.server import AppConfig, StudioServer
+
+    config = AppConfig(
+        port=_free_port(),
+        sessions_dir=tmp_path / "sessions",
+        allowed_roots=(tmp_path / "sessions",),
+        demo_dir=DEMO,
+        tracker_threads=1,
+    )
+    (tmp_path / "sessions").mkdir()
+    server = StudioServer(config)
+    yield server
+    server.stop()
+
+
+def _open_tab(studio, tab_id: int = 1, channel: RecordingChannel | None = None):
+    channel = channel or RecordingChannel()
+    tab = studio.open_tab(channel, studio.viser.gui, studio.viser.scene, tab_id=tab_id)
+    assert tab.wait_idle()
+    return tab, channel
+
+
+def _wait_for(predicate, timeout: float = 30.0) -> None:
+    deadline = time.monotonic() + timeout
+    while not predicate():
+        assert time.monotonic() < deadline, "condition not reached"
+        time.sleep(0.02)
+
+
+def _drag(tab, box) -> None:
+    """A shift-drag over `box` (frame pixels) as the browser reports it."""
+    _wait_for(lambda: tab.letterbox is not None)
+    x, y, w, h = box
+    corner_min = tab.letterbox.frame_to_screen(x, y)
+    corner_max = tab.letterbox.frame_to_screen(x + w, y + h)
+    tab.handle_rect_select(
+        viser.SceneRectSelectEvent(
+            client=None,
+            client_id=0,
+            screen_min=corner_min,
+            screen_max=corner_max,
+            modifier="shift",
+        )
+    )
+    assert tab.wait_idle()
+
+
+def _demo_boxes() -> dict[str, list[float]]:
+    return json.loads((DEMO / "boxes.json").read_text())
+
+
+def _draw_demo_boxes(tab) -> dict[str, list[float]]:
+    boxes = _demo_boxes()
+    for landmark_id in tab.run.scene.landmark_ids:
+        _drag(tab, boxes[landmark_id])
+    return boxes
+
+
+def _click(button) -> None:
+    button.value = True
+
+
+def test_demo_opens_with_its_scene_and_boxes_file(studio) -> None:
+    tab, channel = _open_tab(studio)
+
+    assert tab.run is not None and tab.run.frame_count == len(list((DEMO / "img").iterdir()))
+    assert len(tab.run.scene.landmarks) == 4
+    assert tab.boxes_json_button.visible
+    assert any(name.endswith("demo") for name in tab.sequence_dropdown.options)
+    assert tab.run.session_path is None  # nothing recorded before the first box
+    assert channel.camera_moves >= 1
+
+
+def test_four_drags_make_four_targets_tied_to_the_landmarks(studio) -> None:
+    tab, _ = _open_tab(studio)
+    boxes = _draw_demo_boxes(tab)
+
+    run = tab.run
+    assert list(run.targets) == ["T1", "T2", "T3", "T4"]
+    assert [t.landmark_id for t in run.targets.values()] == list(run.scene.landmark_ids)
+    for target in run.targets.values():
+        drawn = target.results[0].box
+        np.testing.assert_allclose(drawn, boxes[target.landmark_id], atol=2.0)
+    assert run.poses[0].valid  # four boxes on frame 1 give a pose already
+    session = run.session_path
+    assert session is not None and studio.recorded_by(session) == tab.tab_id
+
+
+def test_playing_tracks_every_target_and_estimates_poses(studio) -> None:
+    tab, _ = _open_tab(studio)
+    _draw_demo_boxes(tab)
+    tab.unlimited_checkbox.value = True
+
+    _click(tab.play_button)
+    _wait_for(lambda: tab.cursor >= 6)
+    _click(tab.play_button)
+    assert tab.wait_idle()
+
+    run = tab.run
+    assert not tab.playing
+    last = tab.cursor
+    assert last >= 6 and run.tracked_until == last
+    for target in run.targets.values():
+        assert sorted(target.results) == list(range(last + 1))
+        assert np.isfinite(target.signals["peak_score"][1 : last + 1]).all()
+    assert all(run.poses[index].valid for index in range(last + 1))
+    _wait_for(lambda: tab.view3d.segments_sent >= last - 1)
+    _wait_for(lambda: tab.stats.overlay_maps > 0 and tab.stats.canvas_frames > 0)
+    _wait_for(lambda: (data := tab.plots.data_of(0)) is not None and len(data[0]) == last + 1)
+
+
+def test_slider_tracks_up_to_the_chosen_frame_and_stepping_back_replays(studio) -> None:
+    tab, _ = _open_tab(studio)
+    _draw_demo_boxes(tab)
+
+    tab.frame_slider.value = 9  # 1-based: frame index 8
+    assert tab.wait_idle()
+    assert tab.cursor == 8 and tab.run.tracked_until == 8
+    recorded = tab.run.results_at(7)
+
+    _click(tab.step_back_button)
+    assert tab.wait_idle()
+    assert tab.cursor == 7 and tab.run.tracked_until == 8
+    assert tab.run.results_at(7) == recorded  # shown from the record, not re-tracked
+
+
+def test_correcting_a_box_retracks_that_target_from_there(studio) -> None:
+    from autotrack.sessions import open_session
+
+    tab, _ = _open_tab(studio)
+    _draw_demo_boxes(tab)
+    tab.frame_slider.value = 8
+    assert tab.wait_idle()
+    run = tab.run
+    before = {tid: dict(t.results) for tid, t in run.targets.items()}
+
+    # Step back two frames and redraw T2 somewhere else.
+    _click(tab.step_back_button)
+    _click(tab.step_back_button)
+    assert tab.wait_idle() and tab.cursor == 5
+    tab.draw_dropdown.value = "T2"
+    assert tab.wait_idle() and tab.selected == "T2"
+    old = before["T2"][5].box
+    corrected = (old[0] + 6.0, old[1] + 4.0, old[2], old[3])
+    _drag(tab, corrected)
+
+    t2 = run.targets["T2"]
+    np.testing.assert_allclose(t2.results[5].box, corrected, atol=2.0)
+    assert max(t2.results) == 5  # its later results were dropped
+    for frame_index in range(5):
+        assert t2.results[frame_index] is before["T2"][frame_index]  # earlier ones kept
+    for other in ("T1", "T3", "T4"):
+        assert run.targets[other].results == before[other]  # untouched
+
+    tab.frame_slider.value = 8
+    assert tab.wait_idle()
+    assert max(t2.results) == 7
+    for other in ("T1", "T3", "T4"):
+        assert run.targets[other].results[7] is before[other][7]  # not re-tracked
+
+    run.recorder.flush()
+    events = open_session(run.session_path).events
+    corrections = [e for e in events if e.kind == "box_corrected"]
+    assert [(e.target_id, e.frame_index) for e in corrections] == [("T2", 5)]
+
+
+def test_typed_box_landmark_and_delete(studio) -> None:
+    tab, _ = _open_tab(studio)
+    _draw_demo_boxes(tab)
+
+    tab.box_text.value = "10, 20, 30, 40"
+    _click(tab.apply_box_button)
+    assert tab.wait_idle()
+    run = tab.run
+    assert run.targets["T5"].results[0].box == (10.0, 20.0, 30.0, 40.0)
+    assert run.targets["T5"].landmark_id is None  # all four landmarks are taken
+
+    tab.draw_dropdown.value = "T1"
+    assert tab.wait_idle()
+    landmark_of_t1 = run.targets["T1"].landmark_id
+    tab.landmark_dropdown.value = "none"
+    assert tab.wait_idle()
+    assert run.targets["T1"].landmark_id is None
+    assert landmark_of_t1 not in run.poses[0].used_landmarks
+    tab.landmark_dropdown.value = landmark_of_t1
+    assert tab.wait_idle()
+    assert run.poses[0].valid and len(run.poses[0].used_landmarks) == 4
+
+    tab.draw_dropdown.value = "T5"
+    assert tab.wait_idle()
+    _click(tab.delete_button)
+    assert tab.wait_idle()
+    assert "T5" not in run.targets and tab.selected == "new target"
+
+    tab.box_text.value = "ten, 20, 30"
+    _click(tab.apply_box_button)
+    assert tab.wait_idle()
+    assert "x, y, w, h" in tab._message
+
+
+def test_downloads_hold_tracks_poses_and_the_session(studio) -> None:
+    tab, channel = _open_tab(studio)
+    boxes = _draw_demo_boxes(tab)
+    tab.frame_slider.value = 6
+    assert tab.wait_idle()
+
+    for button in (tab.download_tracks_button, tab.download_poses_button, tab.download_mcap_button):
+        _click(button)
+    assert tab.wait_idle()
+
+    names = [name for name, _ in channel.downloads]
+    assert names[0].endswith("_tracks.zip") and names[1].endswith("_poses.tum")
+    assert names[2] == tab.run.session_path.name
+    with zipfile.ZipFile(io.BytesIO(channel.downloads[0][1])) as archive:
+        assert sorted(archive.namelist()) == ["T1.txt", "T2.txt", "T3.txt", "T4.txt", "tracks.csv"]
+        rows = archive.read("T1.txt").decode().split()
+        csv_rows = archive.read("tracks.csv").decode().strip().splitlines()
+    assert len(rows) == 6
+    first = [float(v) for v in rows[0].split(",")]
+    landmark = tab.run.targets["T1"].landmark_id
+    np.testing.assert_allclose(first, np.add(boxes[landmark], [1, 1, 0, 0]), atol=2.0)
+    assert len(csv_rows) == 1 + 4 * 6
+    tum_rows = [
+        line for line in channel.downloads[1][1].decode().splitlines() if line and line[0] != "#"
+    ]
+    assert len(tum_rows) == sum(pose.valid for pose in tab.run.poses.values()) == 6
+    assert channel.downloads[2][1][:8] == b"\x89MCAP0\r\n"
+
+
+def test_two_tabs_keep_separate_runs_and_cannot_reopen_a_live_session(studio) -> None:
+    first, _ = _open_tab(studio, tab_id=1)
+    second, second_channel = _open_tab(studio, tab_id=2)
+    _drag(first, _demo_boxes()[first.run.scene.landmark_ids[0]])
+
+    assert list(first.run.targets) == ["T1"] and not second.run.targets
+    live = first.run.session_path
+    _click(second.refresh_sessions_button)
+    assert second.wait_idle()
+    second.sessions_dropdown.value = live.name
+    _click(second.reopen_button)
+    assert second.wait_idle()
+    assert "another tab" in second_channel.notes[-1][0]
+    assert not second.run.targets
+
+
+def test_reopened_session_restores_targets_and_continues(studio) -> None:
+    first, _ = _open_tab(studio, tab_id=1)
+    _draw_demo_boxes(first)
+    first.frame_slider.value = 5
+    assert first.wait_idle()
+    recorded = {tid: t.results[4].box for tid, t in first.run.targets.items()}
+    old_path = first.run.session_path
+    studio.tabs.pop(1).close()
+    assert studio.recorded_by(old_path) is None
+
+    tab, _ = _open_tab(studio, tab_id=2)
+    _click(tab.refresh_sessions_button)
+    assert tab.wait_idle()
+    tab.sessions_dropdown.value = old_path.name
+    _click(tab.reopen_button)
+    assert tab.wait_idle()
+
+    run = tab.run
+    assert tab.cursor == 4 and list(run.targets) == ["T1", "T2", "T3", "T4"]
+    for target_id, box in recorded.items():
+        assert run.targets[target_id].results[4].box == box  # history kept as recorded
+        assert sorted(run.targets[target_id].results) == list(range(5))
+    assert run.session_path != old_path
+    _click(tab.step_button)
+    assert tab.wait_idle()
+    assert run.tracked_until == 5
+
+
+def test_paths_outside_the_allowed_folders_are_refused(studio, tmp_path: Path) -> None:
+    tab, channel = _open_tab(studio)
+    opened = tab.sequence_path
+    tab.path_text.value = str(tmp_path.parent)
+    _click(tab.open_path_button)
+    assert tab.wait_idle()
+    assert "outside" in channel.notes[-1][0] and channel.notes[-1][1]
+    assert tab.sequence_path == opened
+
+
+def test_uploaded_zip_opens_as_a_sequence(studio) -> None:
+    tab, _ = _open_tab(studio)
+    frames = sorted((DEMO / "img").iterdir())[:3]
+    content = _zip({f"clip/{path.name}": path.read_bytes() for path in frames})
+    tab.receive_upload("clip.zip", content)
+    assert tab.wait_idle()
+    assert tab.run.frame_count == 3 and tab.run.scene is None
+    assert tab.sequence_path.is_relative_to(studio.config.upload_dir.resolve())
+    assert any("uploads" in name for name in tab.sequence_dropdown.options)
+
+
+def test_cli_refuses_a_missing_sequence_in_one_line(capsys, tmp_path: Path) -> None:
+    from autotrack.cli import main
+
+    code = main(["app", str(tmp_path / "nothing")])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert code == 2 and len(err) == 1 and "no such sequence" in err[0]
+    code = main(["app", "--allow-root", str(tmp_path / "nope")])
+    assert code == 2
+
+
+def test_startup_roots_cover_the_sequence_and_scene_folders(tmp_path: Path) -> None:
+    from autotrack.cli.app import startup_roots
+
+    sequence = tmp_path / "data" / "seq"
+    (sequence / "img").mkdir(parents=True)
+    scene = tmp_path / "scenes" / "scene.json"
+    scene.parent.mkdir()
+    scene.write_text("{}")
+    roots = startup_roots(sequence, scene, [tmp_path / "data"])
+    assert roots == [(tmp_path / "data").resolve(), sequence.resolve(), scene.parent.resolve()]

@@ -1,0 +1,147 @@
+"""The filter's maths: g-step, h-step, detection peak, Fourier shifts, regularisation signals."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from autotrack import dcf, regularization
+
+
+def _random_spectra(rng: np.random.Generator, grid=(6, 8), channels=3):
+    features = rng.standard_normal((channels, *grid)).astype(np.float32)
+    return features, dcf.to_spectrum(features)
+
+
+def test_g_step_closed_form_equals_direct_per_pixel_solve():
+    rng = np.random.default_rng(0)
+    grid, channels = (6, 8), 3
+    num_cells = grid[0] * grid[1]
+    _, xf = _random_spectra(rng, grid, channels)
+    _, h_f = _random_spectra(rng, grid, channels)
+    _, l_f = _random_spectra(rng, grid, channels)
+    _, g_prev = _random_spectra(rng, grid, channels)
+    yf = dcf.to_spectrum(dcf.gaussian_label(grid, 1.3).astype(np.float32))
+    gamma, theta = 10.0, 13.0
+    s_xx = np.sum(np.abs(xf) ** 2, axis=0).astype(np.float32)
+    s_gx_prev = np.sum(np.conj(xf) * g_prev, axis=0)
+    g_f = dcf.solve_g_step(xf, yf, h_f, l_f, g_prev, s_xx, s_gx_prev, gamma, theta, num_cells)
+
+    # Per frequency j: (x x^H / T + (gamma + theta) I) g = y x / T - l + gamma h + theta g_prev.
+    for row in range(xf.shape[1]):
+        for col in range(xf.shape[2]):
+            x = xf[:, row, col].astype(np.complex128)
+            system = np.outer(x, np.conj(x)) / num_cells + (gamma + theta) * np.eye(channels)
+            rhs = (
+                yf[row, col] * x / num_cells
+                - l_f[:, row, col]
+                + gamma * h_f[:, row, col]
+                + theta * g_prev[:, row, col]
+            )
+            expected = np.linalg.solve(system, rhs)
+            np.testing.assert_allclose(g_f[:, row, col], expected, rtol=1e-4, atol=1e-5)
+
+
+def test_h_step_equals_its_definition_on_the_full_spectrum():
+    rng = np.random.default_rng(1)
+    grid, channels = (7, 10), 2
+    num_cells = grid[0] * grid[1]
+    g_space = rng.standard_normal((channels, *grid))
+    l_space = rng.standard_normal((channels, *grid))
+    window = rng.uniform(0.001, 5.0, size=grid)
+    gamma, lam = 100.0, 1.0
+    g_half = dcf.to_spectrum(g_space.astype(np.float32))
+    l_half = dcf.to_spectrum(l_space.astype(np.float32))
+    h_half = dcf.solve_h_step(g_half, l_half, window.astype(np.float32), gamma, lam, grid)
+
+    # Definition (paper eq. 12, release form): h = T / (lambda u^2 + gamma T) * ifft2(gamma (g + l)).
+    g_full = np.fft.fft2(g_space)
+    l_full = np.fft.fft2(l_space)
+    h_space = (num_cells / (lam * window**2 + gamma * num_cells)) * np.fft.ifft2(
+        gamma * (g_full + l_full)
+    )
+    h_full = np.fft.fft2(h_space)
+    np.testing.assert_allclose(h_half, h_full[..., : grid[1] // 2 + 1], rtol=1e-4, atol=1e-3)
+
+
+@pytest.mark.parametrize("shift", [(0.0, 0.0), (2.3, -1.6), (-4.45, 3.7), (0.5, 0.5)])
+def test_newton_peak_recovers_a_known_subpixel_shift(shift):
+    grid = (50, 46)
+    rows = dcf.centred_frequencies(grid[0])[:, None]
+    cols = dcf.centred_frequencies(grid[1])[None, :]
+    # A smooth periodic peak at (shift): Gaussian spectrum times the shift's phase ramp.
+    spectrum = np.exp(-0.5 * ((rows / 6.0) ** 2 + (cols / 6.0) ** 2)) * np.exp(
+        -2j * np.pi * (rows * shift[0] / grid[0] + cols * shift[1] / grid[1])
+    )
+    response = np.real(np.fft.ifft2(spectrum))
+    disp_row, disp_col, score = dcf.newton_peak(response, iterations=5)
+    assert disp_row == pytest.approx(shift[0], abs=0.02)
+    assert disp_col == pytest.approx(shift[1], abs=0.02)
+    assert score >= response.max() - 1e-12
+
+
+def test_shift_spectrum_moves_features_by_whole_cells():
+    rng = np.random.default_rng(2)
+    grid = (12, 10)
+    features = rng.standard_normal((2, *grid)).astype(np.float32)
+    shifted = dcf.from_spectrum(dcf.shift_spectrum(dcf.to_spectrum(features), 3, -2, grid), grid)
+    # exp(+i k s) reads the signal s cells further on: out[r, c] = in[r + 3, c - 2].
+    np.testing.assert_allclose(shifted, np.roll(features, (-3, 2), axis=(1, 2)), atol=1e-5)
+
+
+def test_label_peaks_at_origin_and_window_matches_release_hann():
+    label = dcf.gaussian_label((5, 6), 1.0)
+    assert label[0, 0] == pytest.approx(1.0)
+    assert label[1, 0] == pytest.approx(label[-1, 0])
+    window = dcf.cosine_window((3, 3))
+    # MATLAB hann(5) = [0 .5 1 .5 0]; without its ends [.5 1 .5].
+    np.testing.assert_allclose(window[1], [0.5, 1.0, 0.5], atol=1e-7)
+
+
+def test_matlab_round_rounds_halves_away_from_zero():
+    np.testing.assert_array_equal(dcf.matlab_round([0.5, 1.5, 2.5, -0.5, -2.5]), [1, 2, 3, -1, -3])
+
+
+def test_local_variation_is_zero_for_a_translated_identical_response():
+    rng = np.random.default_rng(3)
+    previous = rng.uniform(0.1, 1.0, size=(10, 10))
+    current = np.roll(previous, (2, -3), axis=(0, 1))
+    variation = regularization.local_variation(current, (2.4, -2.6), previous, (0.2, 0.1))
+    # floor(2.4) = 2, floor(-2.6) = -3: aligning both peaks undoes the motion exactly.
+    np.testing.assert_allclose(variation, 0.0, atol=1e-6)
+    assert regularization.global_variation(variation) == pytest.approx(0.0, abs=1e-9)
+
+
+def test_global_variation_uses_the_spectral_norm_and_flags_blow_ups():
+    variation = np.diag([3.0, 4.0]).astype(np.float32)
+    # Largest singular value 4 (Frobenius would be 5), scaled by 1e-4.
+    assert regularization.global_variation(variation) == pytest.approx(4e-4)
+    variation[0, 1] = np.inf
+    assert regularization.global_variation(variation) == float("inf")
+    assert regularization.is_aberrant(float("inf"), 0.3)
+    assert regularization.is_aberrant(float("nan"), 0.3)
+    assert not regularization.is_aberrant(0.29, 0.3)
+
+
+def test_temporal_reference_matches_paper_scaling():
+    # Release: zeta / (1 + log(0.2 * ||Pi|| / 1e4 + 1)) == paper: nu = 2e-5 on the raw norm.
+    raw_norm = 2500.0
+    release = regularization.temporal_reference(raw_norm * 1e-4, 13.0, 0.2)
+    paper = 13.0 / (1.0 + np.log(2e-5 * raw_norm + 1.0))
+    assert release == pytest.approx(paper)
+
+
+def test_adaptive_window_replaces_only_the_target_region():
+    base = regularization.base_spatial_window((10, 12), (4, 5), 1e5, 1e-3)
+    region = regularization.target_region((10, 12), (4, 5))
+    assert np.all(base[region] == np.float32(1e-3))
+    assert np.sum(base == np.float32(1e-3)) == 20
+    variation = np.full((10, 12), np.e - 1.0, dtype=np.float32)
+    variation[region[0].start, region[1].start] = np.nan
+    window = regularization.adaptive_spatial_window(base, variation, region, 0.2)
+    inside = window[region]
+    assert inside[0, 0] == np.float32(1e5)  # a non-finite variation never reaches the filter
+    np.testing.assert_allclose(inside.ravel()[1:], 0.2, rtol=1e-6)
+    outside = window.copy()
+    outside[region] = 1e5
+    assert np.all(outside == np.float32(1e5))

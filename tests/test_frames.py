@@ -1,0 +1,128 @@
+"""Frame sources: image folders, benchmark sequence folders, videos, and their errors."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import cv2
+import numpy as np
+import pytest
+
+from autotrack.errors import InputError
+from autotrack.frames import ImageSequence, VideoFrames, open_frames
+
+SHARED = Path(__file__).resolve().parents[1] / ".." / "shared" / "data" / "sequences"
+
+
+def _write_frames(folder: Path, count: int, size_wh=(32, 24)) -> list[np.ndarray]:
+    """Colour PNGs whose BGR pixel value encodes the frame index."""
+    folder.mkdir(parents=True, exist_ok=True)
+    frames = []
+    for index in range(count):
+        frame = np.zeros((size_wh[1], size_wh[0], 3), np.uint8)
+        frame[..., 0] = 200  # blue in OpenCV's BGR order
+        frame[..., 2] = 10 * index  # red
+        cv2.imwrite(str(folder / f"{index + 1:04d}.png"), frame)
+        frames.append(frame)
+    return frames
+
+
+def test_image_folder_reads_rgb_in_sorted_order(tmp_path):
+    written = _write_frames(tmp_path / "seq", 5)
+    (tmp_path / "seq" / "notes.txt").write_text("not a frame")
+    source = open_frames(tmp_path / "seq")
+    assert isinstance(source, ImageSequence)
+    assert len(source) == 5 and source.name == "seq" and source.fps is None
+    assert source.frame_size == (32, 24)
+    rgb = source.read(3)
+    assert rgb.dtype == np.uint8 and rgb.shape == (24, 32, 3)
+    assert tuple(rgb[0, 0]) == (30, 0, 200)  # R, G, B
+    np.testing.assert_array_equal(source.read_bgr(3), written[3])
+    np.testing.assert_array_equal(source.read(-1), source.read(4))
+    assert [int(frame[0, 0, 0]) for frame in source] == [0, 10, 20, 30, 40]
+    with pytest.raises(IndexError):
+        source.read(5)
+
+
+def test_grey_images_stay_two_dimensional(tmp_path):
+    folder = tmp_path / "grey"
+    folder.mkdir()
+    cv2.imwrite(str(folder / "a.png"), np.full((10, 12), 77, np.uint8))
+    frame = open_frames(folder).read(0)
+    assert frame.shape == (10, 12) and int(frame[0, 0]) == 77
+
+
+def test_benchmark_sequence_folder_uses_img_and_its_own_name(tmp_path):
+    _write_frames(tmp_path / "Bird" / "img", 3)
+    (tmp_path / "Bird" / "groundtruth_rect.txt").write_text("1,1,5,5\n" * 3)
+    source = open_frames(tmp_path / "Bird")
+    assert source.name == "Bird" and len(source) == 3
+
+
+def test_missing_path_is_an_input_error(tmp_path):
+    with pytest.raises(InputError, match="no such file or folder"):
+        open_frames(tmp_path / "nowhere")
+
+
+def test_empty_folder_is_an_input_error(tmp_path):
+    (tmp_path / "empty").mkdir()
+    with pytest.raises(InputError, match="no image files"):
+        open_frames(tmp_path / "empty")
+
+
+def test_corrupt_frame_names_its_index_and_file(tmp_path):
+    _write_frames(tmp_path / "seq", 5)
+    corrupt = tmp_path / "seq" / "0003.png"
+    corrupt.write_bytes(b"\x89PNG this is not an image")
+    source = open_frames(tmp_path / "seq")
+    source.read(1)
+    with pytest.raises(InputError) as error:
+        source.read(2)
+    message = str(error.value)
+    assert "frame 2 (0-based; frame 3 counting from 1)" in message
+    assert str(corrupt) in message
+
+
+def test_unopenable_video_is_an_input_error(tmp_path):
+    video = tmp_path / "broken.mp4"
+    video.write_bytes(b"definitely not a video" * 20)
+    with pytest.raises(InputError, match="cannot open video"):
+        open_frames(video)
+
+
+def test_video_random_access_forward_and_backward(tmp_path):
+    path = tmp_path / "clip.avi"
+    writer = cv2.VideoWriter(str(path), cv2.VideoWriter_fourcc(*"MJPG"), 12.0, (64, 48))
+    assert writer.isOpened()
+    for index in range(40):
+        writer.write(np.full((48, 64, 3), 6 * index, np.uint8))
+    writer.release()
+
+    source = open_frames(path)
+    assert isinstance(source, VideoFrames)
+    assert len(source) == 40 and source.fps == pytest.approx(12.0)
+    assert source.frame_size == (64, 48)
+
+    def level(index: int) -> float:
+        return float(source.read(index).mean())
+
+    # Forward, a short step back (cache), a long jump back (re-decode from the start).
+    for index in (0, 10, 39, 35, 2, 20):
+        assert level(index) == pytest.approx(6 * index, abs=3), index
+    source.close()
+
+
+def test_single_image_file_is_a_one_frame_source(tmp_path):
+    _write_frames(tmp_path, 1)
+    source = open_frames(tmp_path / "0001.png")
+    assert len(source) == 1 and source.read(0).shape == (24, 32, 3)
+
+
+def test_real_benchmark_sequence():
+    folder = SHARED / "OTB" / "Crossing"
+    if not folder.is_dir():
+        pytest.skip("shared data not available")
+    source = open_frames(folder)
+    assert len(source) == 120
+    assert source.frame_size == (360, 240)
+    assert source.read(119).shape == (240, 360, 3)
