@@ -1,7 +1,10 @@
 """Live uPlot charts of the tracker's signals over frames, one series per target.
 
-Frames without a value hold NaN: uPlot skips them when ranging and drawing. Aberrant frames
-are a points-only red series on the peak-score and global-variation charts.
+Frames without a value hold NaN, which uPlot cannot range over (a NaN anywhere on a scale
+leaves the chart empty) but skips when drawing a line or a point. So every chart gets an
+explicit y range from the finite values, widened with headroom and only ever grown, so it
+changes rarely. Aberrant frames are a points-only red series on the peak-score and
+global-variation charts.
 """
 
 from __future__ import annotations
@@ -14,6 +17,27 @@ import viser
 import viser.uplot
 
 ABERRANT_COLOUR = "#e03131"
+X_SCALE: viser.uplot.Scale = {"time": False}
+"""Frames, not timestamps, on the x axis."""
+
+
+def y_range(
+    arrays: Sequence[np.ndarray], current: tuple[float, float] | None
+) -> tuple[float, float]:
+    """A y range holding every finite value and `current`, with 10% headroom, rounded
+    outward to a step of a tenth of its span's order of magnitude."""
+    finite = [values[np.isfinite(values)] for values in arrays]
+    values = np.concatenate(finite) if finite else np.zeros(0)
+    if values.size == 0:
+        low, high = (0.0, 1.0) if current is None else current
+    else:
+        low, high = float(values.min()), float(values.max())
+        if current is not None:
+            low, high = min(low, current[0]), max(high, current[1])
+    span = max(high - low, 1e-6, 1e-3 * max(abs(low), abs(high)))
+    low, high = low - 0.1 * span, high + 0.1 * span
+    step = 10.0 ** np.floor(np.log10(span)) / 10.0
+    return (float(np.floor(low / step) * step), float(np.ceil(high / step) * step))
 
 
 @dataclass(frozen=True)
@@ -70,6 +94,7 @@ class SignalPlots:
         self.gui = gui
         self._target_ids: tuple[str, ...] | None = None
         self._handles: list[viser.GuiUplotHandle] = []
+        self._ranges: list[tuple[float, float] | None] = []
         self._folder = gui.add_folder("Plots", expand_by_default=True)
 
     def _build(self, history: SignalHistory) -> None:
@@ -88,6 +113,7 @@ class SignalPlots:
                     _markers("aberrant"),
                 ),
                 title="Peak score",
+                scales={"x": X_SCALE},
                 aspect=2.0,
             )
             variation = self.gui.add_uplot(
@@ -99,6 +125,7 @@ class SignalPlots:
                     _markers("aberrant"),
                 ),
                 title="Global variation η vs threshold φ",
+                scales={"x": X_SCALE},
                 aspect=2.0,
             )
             theta_series: list[viser.uplot.Series] = []
@@ -109,15 +136,18 @@ class SignalPlots:
                 data=(empty, *[empty] * (2 * len(ids))),
                 series=(x_series, *theta_series),
                 title="θ_ref (dashed) and θ",
+                scales={"x": X_SCALE},
                 aspect=2.0,
             )
             fps = self.gui.add_uplot(
                 data=(empty, empty),
                 series=(x_series, _line("fps", "#1971c2")),
                 title="Tracking speed (frames/s)",
+                scales={"x": X_SCALE},
                 aspect=2.5,
             )
         self._handles = [peak, variation, theta, fps]
+        self._ranges = [None] * len(self._handles)
         self._target_ids = ids
 
     def update(self, history: SignalHistory) -> None:
@@ -137,22 +167,28 @@ class SignalPlots:
         def signal(name: str) -> list[np.ndarray]:
             return [history.signals[tid][name][:count] for tid in ids]
 
-        peak, variation, theta, fps = self._handles
-        peak.data = (frames, *signal("peak_score"), _aberrant_values(history, "peak_score", count))
-        variation.data = (
-            frames,
-            *signal("global_variation"),
-            np.full(count, history.phi),
-            _aberrant_values(history, "global_variation", count),
-        )
         theta_values: list[np.ndarray] = []
         for tid in ids:
             theta_values.append(history.signals[tid]["theta_ref"][:count])
             theta_values.append(history.signals[tid]["theta"][:count])
-        theta.data = (frames, *theta_values)
         with np.errstate(divide="ignore", invalid="ignore"):
             rate = 1.0 / history.frame_seconds[:count]
-        fps.data = (frames, np.where(np.isfinite(rate), rate, np.nan))
+        charts = (
+            (*signal("peak_score"), _aberrant_values(history, "peak_score", count)),
+            (
+                *signal("global_variation"),
+                np.full(count, history.phi),
+                _aberrant_values(history, "global_variation", count),
+            ),
+            tuple(theta_values),
+            (np.where(np.isfinite(rate), rate, np.nan),),
+        )
+        for index, (handle, series) in enumerate(zip(self._handles, charts, strict=True)):
+            span = y_range(series, self._ranges[index])
+            if span != self._ranges[index]:
+                handle.scales = {"x": X_SCALE, "y": {"auto": False, "range": span}}
+                self._ranges[index] = span
+            handle.data = (frames, *series)
 
     def data_of(self, title_index: int) -> Sequence[np.ndarray] | None:
         """The data last sent to chart `title_index` (0 peak, 1 variation, 2 theta, 3 fps)."""

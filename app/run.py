@@ -207,9 +207,13 @@ class TrackingRun:
             landmark_id=landmark_id,
             signals={name: np.full(self.frame_count, np.nan) for name in SIGNAL_NAMES},
         )
-        self._next_number += 1
         self.targets[target_id] = target
-        self._start_tracking(target, frame_index, box)
+        try:
+            self._start_tracking(target, frame_index, box)
+        except Exception:
+            del self.targets[target_id]
+            raise
+        self._next_number += 1
         self._log_event("box_drawn", frame_index, target_id, box=box, landmark_id=landmark_id)
         return target_id
 
@@ -268,8 +272,8 @@ class TrackingRun:
     def _group_of(self, target_id: str) -> _Group | None:
         return next((group for group in self._groups if target_id in group.target_ids), None)
 
-    def _leave_group(self, target_id: str) -> None:
-        group = self._group_of(target_id)
+    def _leave_group(self, target_id: str, group: _Group | None = None) -> None:
+        group = group or self._group_of(target_id)
         if group is None:
             return
         group.target_ids.remove(target_id)
@@ -285,23 +289,32 @@ class TrackingRun:
         """(Re)initialise `target` on `frame_index` with `box` and drop its later results.
 
         The init result becomes the target's result there, unless `kept` (a recorded result
-        to keep as history) is given."""
+        to keep as history) is given. If the tracker refuses the box, nothing changes.
+        """
         frame = self.frame(frame_index)
-        group = self._group_of(target.id)
-        if group is not None and group.head == frame_index:
-            result = group.tracker.reset_target(target.id, frame, box)
+        current = self._group_of(target.id)
+        if current is not None and current.head == frame_index:
+            result = current.tracker.reset_target(target.id, frame, box)
         else:
-            self._leave_group(target.id)
-            group = next((g for g in self._groups if g.head == frame_index), None)
-            if group is not None:
-                result = group.tracker.add_target(target.id, frame, box)
-                group.target_ids.append(target.id)
+            joined = next((g for g in self._groups if g.head == frame_index), None)
+            if joined is not None:
+                result = joined.tracker.add_target(target.id, frame, box)
+                joined.target_ids.append(target.id)
             else:
                 tracker = MultiTracker(self.params, [target.id], threads=self.tracker_threads)
-                result = tracker.init(frame, {target.id: box})[target.id]
+                try:
+                    result = tracker.init(frame, {target.id: box})[target.id]
+                except Exception:
+                    tracker.close()
+                    raise
                 self._groups.append(_Group(tracker, frame_index, [target.id]))
-        for later in [index for index in target.results if index >= frame_index]:
+            if current is not None:
+                self._leave_group(target.id, current)
+        for later in [index for index in target.results if index > frame_index]:
             del target.results[later]
+            # The recording keeps the latest record per frame: a record without a box says
+            # this target has no result there any more (until it is tracked again).
+            self._log_result(target, discarded_result(later))
         for values in target.signals.values():
             values[frame_index:] = np.nan
         self._store(target, kept if kept is not None else result, frame_index)
@@ -374,8 +387,12 @@ class TrackingRun:
     # -- localisation -------------------------------------------------------------------------
 
     def _drop_poses_from(self, frame_index: int) -> None:
+        recorder = self._recording() if self.targets else None
         for index in [index for index in self.poses if index >= frame_index]:
             del self.poses[index]
+            if recorder is not None:
+                # Superseded in the recording too: re-estimated later, or left invalid.
+                recorder.log_pose(discarded_pose(index))
         if self._localizer is not None and self._last_pose_frame >= frame_index:
             # The localiser keeps the previous pose as a continuity prior: start it afresh.
             self._localizer.reset()
@@ -504,3 +521,34 @@ class TrackingRun:
             recorder = self._recording()
             if recorder is not None:
                 recorder.log_pose(pose)
+
+
+def discarded_result(frame_index: int) -> TrackResult:
+    """A record saying a target has no result on `frame_index` (its box was redrawn earlier)."""
+    nan = float("nan")
+    return TrackResult(
+        frame_index=frame_index,
+        box=(nan, nan, nan, nan),
+        peak_score=nan,
+        response_map=None,
+        local_variation=None,
+        global_variation=nan,
+        theta_ref=nan,
+        theta=nan,
+        aberrant=False,
+        scale_factor=nan,
+        search_box=(nan, nan, nan, nan),
+    )
+
+
+def discarded_pose(frame_index: int) -> PoseEstimate:
+    """A record saying the pose of `frame_index` no longer holds (a box before it changed)."""
+    return PoseEstimate(
+        frame_index=frame_index,
+        valid=False,
+        rotation=np.full((3, 3), np.nan),
+        position=np.full(3, np.nan),
+        reprojection_errors={},
+        used_landmarks=(),
+        reason="discarded: a box was redrawn on an earlier frame",
+    )

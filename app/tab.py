@@ -18,6 +18,7 @@ import sys
 import threading
 import time
 import traceback
+from collections import deque
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -46,7 +47,7 @@ from autotrack.errors import AutoTrackError, InputError
 from autotrack.frames import open_frames
 from autotrack.localize import PoseEstimate, read_tum
 from autotrack.params import PRESETS, preset
-from autotrack.scene import Scene, load_scene
+from autotrack.scene import load_scene
 from autotrack.sessions import last_state, open_session
 
 if TYPE_CHECKING:
@@ -72,6 +73,8 @@ CANVAS_MAX_WIDTH = 1280
 """Largest width of the letterboxed canvas background (pixels)."""
 DEFAULT_CANVAS_SIZE = (1280, 720)
 """Canvas size assumed until the browser reports one."""
+TIMES_KEPT = 2000
+"""Send times kept per kind for measuring display rates."""
 
 
 @dataclass(frozen=True)
@@ -100,10 +103,10 @@ class DisplayStats:
     map_panel_updates: int = 0
     plot_updates: int = 0
     scene_updates: int = 0
-    canvas_times: list[float] = field(default_factory=list)
-    """Send times (time.monotonic) of the canvas frames."""
-    video_times: list[float] = field(default_factory=list)
-    """Send times of the video-panel frames."""
+    canvas_times: deque[float] = field(default_factory=lambda: deque(maxlen=TIMES_KEPT))
+    """Send times (time.monotonic) of the latest canvas frames."""
+    video_times: deque[float] = field(default_factory=lambda: deque(maxlen=TIMES_KEPT))
+    """Send times of the latest video-panel frames."""
 
 
 def parse_box(text: str) -> tuple[float, float, float, float]:
@@ -353,6 +356,8 @@ class Tab:
         self._message = message
         if error:
             self.channel.notify("AutoTrack Studio", message, error=True)
+        if self.run is None:
+            self._set(self.status, "content", message)
         self._publish()
 
     def _after_command(self) -> None:
@@ -487,9 +492,14 @@ class Tab:
         self, screen_min: tuple[float, float], screen_max: tuple[float, float]
     ) -> None:
         run = self._require_run()
-        letterbox = self.letterbox or fit_letterbox(
-            run.frames.frame_size, self.channel.canvas_size() or DEFAULT_CANVAS_SIZE
-        )
+        letterbox = self.letterbox
+        if letterbox is None or (letterbox.frame_width, letterbox.frame_height) != (
+            run.frames.frame_size
+        ):
+            # The canvas still shows another sequence's frame: map as the next one will show.
+            letterbox = fit_letterbox(
+                run.frames.frame_size, self.channel.canvas_size() or DEFAULT_CANVAS_SIZE
+            )
         box = letterbox.rect_to_box(screen_min, screen_max)
         if box is None:
             raise InputError("the dragged box misses the frame or is too thin; drag again")
@@ -948,8 +958,3 @@ def pose_text(pose: PoseEstimate) -> str:
         return f"pose invalid: {pose.reason}"
     x, y, z = (float(v) for v in pose.position)
     return f"camera at ({x:.2f}, {y:.2f}, {z:.2f}) m, {pose.rms_error_px:.2f} px RMS"
-
-
-def describe_scene(scene: Scene | None) -> str:
-    """Landmark ids of a scene for messages."""
-    return "no scene" if scene is None else ", ".join(scene.landmark_ids)

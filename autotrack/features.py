@@ -235,9 +235,8 @@ def load_colour_table(path: str | Path) -> np.ndarray:
     """
     file = Path(path).expanduser()
     if not file.is_file():
-        raise InputError(
-            f"colour table {str(file)!r} does not exist (expected a .npy or .mat file)"
-        )
+        problem = "is not a file" if file.exists() else "does not exist"
+        raise InputError(f"colour table {str(file)!r} {problem} (expected a .npy or .mat file)")
     suffix = file.suffix.lower()
     if suffix == ".npy":
         try:
@@ -321,13 +320,14 @@ def srgb_to_lab(rgb: np.ndarray) -> np.ndarray:
 
 @lru_cache(maxsize=1)
 def _prototype_lab() -> tuple[np.ndarray, np.ndarray]:
-    """(term index per prototype, CIELAB of each prototype)."""
-    terms, colours = [], []
-    for term_index, term in enumerate(COLOUR_TERMS):
-        for hex_colour in COLOUR_PROTOTYPES[term]:
-            terms.append(term_index)
-            colours.append([int(hex_colour[i : i + 2], 16) for i in (0, 2, 4)])
-    return np.array(terms), srgb_to_lab(np.array(colours, dtype=np.float64))
+    """(index of each term's first prototype, CIELAB of the prototypes grouped by term)."""
+    first, colours = [], []
+    for term in COLOUR_TERMS:
+        first.append(len(colours))
+        colours.extend(
+            [int(code[i : i + 2], 16) for i in (0, 2, 4)] for code in COLOUR_PROTOTYPES[term]
+        )
+    return np.array(first), srgb_to_lab(np.array(colours, dtype=np.float64))
 
 
 def colour_term_probabilities(rgb: np.ndarray, sigma: float = LAB11_SIGMA) -> np.ndarray:
@@ -335,12 +335,14 @@ def colour_term_probabilities(rgb: np.ndarray, sigma: float = LAB11_SIGMA) -> np
 
     p_t ∝ exp(-d_t^2 / (2 sigma^2)), d_t the CIELAB distance to term t's nearest prototype.
     """
-    terms, prototypes = _prototype_lab()
+    first, prototypes = _prototype_lab()
     lab = srgb_to_lab(rgb)
-    squared = ((lab[..., None, :] - prototypes) ** 2).sum(axis=-1)
-    nearest = np.stack(
-        [squared[..., terms == t].min(axis=-1) for t in range(len(COLOUR_TERMS))], axis=-1
+    squared = (
+        (lab**2).sum(axis=-1, keepdims=True)
+        + (prototypes**2).sum(axis=-1)
+        - 2.0 * lab @ prototypes.T
     )
+    nearest = np.minimum.reduceat(np.maximum(squared, 0.0), first, axis=-1)
     logits = -nearest / (2.0 * sigma**2)
     logits -= logits.max(axis=-1, keepdims=True)
     weights = np.exp(logits)
@@ -376,6 +378,9 @@ def lab11_table() -> np.ndarray:
 def lab11_colour_feature(patch_rgb_uint8: np.ndarray, cell: int) -> np.ndarray:
     """Our default colour feature: cell means of the 'lab11' lookup -> (H//c, W//c, 10)."""
     return colour_table_feature(patch_rgb_uint8, lab11_table(), cell)
+
+
+lab11_table()  # built once here, at import (tens of ms), so no tracked frame pays for it
 
 
 # -- the stack ----------------------------------------------------------------------------------

@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import itertools
 import math
+from collections import deque
 from collections.abc import Iterable, Iterator, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -51,7 +52,13 @@ class LocalizerParams:
     solved again without it."""
     min_peak_score: float = 0.0
     """Landmarks whose tracker peak score is below this are dropped (0 keeps all; NaN, as in the
-    first frame, always passes)."""
+    first frame, always passes). Peak values depend on the target; see min_relative_peak."""
+    min_relative_peak: float = 0.3
+    """A landmark whose peak score falls below this fraction of its own median peak (over its
+    last `peak_history_frames` trusted frames) is dropped: the tracker has lost confidence
+    (occlusion, drift). 0 disables."""
+    peak_history_frames: int = 30
+    """Trusted frames per landmark the median peak is taken over (at least 5 are needed)."""
     aberrant_weight: float = 0.25
     """Weight of a landmark whose tracker flagged the frame aberrant (1 = full, 0 = drop)."""
     max_translation_per_frame_m: float = 0.5
@@ -96,6 +103,8 @@ class PoseEstimate:
     """RMS reprojection error over the landmarks used (px)."""
     position_std_m: float = math.nan
     """Predicted 1-sigma uncertainty of the camera position (metres, all axes together)."""
+    excluded_landmarks: dict[str, str] = field(default_factory=dict)
+    """Landmarks left out of the solve and why (lost, low peak score, aberrant, outlier)."""
 
     def quaternion_xyzw(self) -> np.ndarray:
         """The rotation as a unit quaternion (qx, qy, qz, qw), TUM order; NaN when invalid."""
@@ -351,6 +360,10 @@ def search_correspondences(
     return {landmark_id: row for row, landmark_id in enumerate(chosen)}
 
 
+def _describe(excluded: Mapping[str, str]) -> str:
+    return "; ".join(f"{landmark_id} {why}" for landmark_id, why in excluded.items())
+
+
 def _in_front(object_points: np.ndarray, rvec: np.ndarray, tvec: np.ndarray, min_depth: float):
     rotation_cw, _ = cv2.Rodrigues(np.asarray(rvec, dtype=np.float64).reshape(3, 1))
     depths = (object_points @ rotation_cw.T + np.asarray(tvec).reshape(1, 3))[:, 2]
@@ -375,10 +388,13 @@ class Localizer:
     scene: Scene
     params: LocalizerParams = field(default_factory=LocalizerParams)
     _prior: _Prior | None = field(default=None, init=False, repr=False)
+    _peaks: dict[str, deque[float]] = field(default_factory=dict, init=False, repr=False)
 
     def reset(self) -> None:
-        """Forget the previous pose (call when frames are not consecutive any more)."""
+        """Forget the previous pose and the peak-score history (call when frames are not
+        consecutive any more or the trackers were restarted)."""
         self._prior = None
+        self._peaks.clear()
 
     def estimate(
         self,
@@ -397,28 +413,36 @@ class Localizer:
         aberrant = aberrant or {}
         for landmark_id in points:
             self.scene.landmark(landmark_id)
-        dropped: list[str] = []
+        excluded: dict[str, str] = {}
         usable: list[str] = []
         weights: list[float] = []
         for landmark_id in self.scene.landmark_ids:
             point = points.get(landmark_id)
             if point is None or not np.all(np.isfinite(point)):
-                dropped.append(f"{landmark_id} lost")
+                excluded[landmark_id] = "lost"
                 continue
             score = confidences.get(landmark_id, math.nan)
             if math.isfinite(score) and score < params.min_peak_score:
-                dropped.append(f"{landmark_id} peak {score:.3f} < {params.min_peak_score:g}")
+                excluded[landmark_id] = f"peak {score:.3g} < {params.min_peak_score:g}"
+                continue
+            typical = self._typical_peak(landmark_id)
+            if math.isfinite(score) and score < params.min_relative_peak * typical:
+                excluded[landmark_id] = (
+                    f"peak {score:.3g} < {params.min_relative_peak:g} x its median {typical:.3g}"
+                )
                 continue
             weight = params.aberrant_weight if aberrant.get(landmark_id, False) else 1.0
             if weight <= 0.0:
-                dropped.append(f"{landmark_id} aberrant")
+                excluded[landmark_id] = "aberrant"
                 continue
             usable.append(landmark_id)
             weights.append(weight)
         prior = self._current_prior(frame_index)
         if len(usable) < 3:
-            detail = "; ".join(dropped)
-            return self._invalid(frame_index, f"only {len(usable)} usable landmark(s) ({detail})")
+            detail = _describe(excluded)
+            return self._invalid(
+                frame_index, f"only {len(usable)} usable landmark(s) ({detail})", excluded
+            )
         ids = tuple(usable)
         image_points = np.array([points[i] for i in ids], dtype=np.float64).reshape(-1, 2)
         weight_array = np.array(weights)
@@ -431,10 +455,26 @@ class Localizer:
             # OpenCV asserts on coincident or collinear image points: no pose, not a crash.
             fit, reason = None, "degenerate image points (coincident or collinear): no PnP solution"
         if fit is None:
-            if dropped:
-                reason = f"{reason} ({'; '.join(dropped)})"
-            return self._invalid(frame_index, reason)
-        return self._checked(frame_index, fit, weight_array, ids, prior)
+            if excluded:
+                reason = f"{reason} ({_describe(excluded)})"
+            return self._invalid(frame_index, reason, excluded)
+        pose = self._checked(frame_index, fit, weight_array, ids, prior, excluded, image_points)
+        if pose.valid:
+            for landmark_id in pose.used_landmarks:
+                score = confidences.get(landmark_id, math.nan)
+                if math.isfinite(score):
+                    history = self._peaks.setdefault(
+                        landmark_id, deque(maxlen=params.peak_history_frames)
+                    )
+                    history.append(score)
+        return pose
+
+    def _typical_peak(self, landmark_id: str) -> float:
+        """Median peak score of a landmark over its recent trusted frames (NaN: too few yet)."""
+        history = self._peaks.get(landmark_id)
+        if history is None or len(history) < 5:
+            return math.nan
+        return float(np.median(history))
 
     # -- solving ---------------------------------------------------------------------------
 
@@ -528,10 +568,22 @@ class Localizer:
         weights_all: np.ndarray,
         ids_all: tuple[str, ...],
         prior: _Prior | None,
+        excluded: dict[str, str],
+        points_all: np.ndarray,
     ) -> PoseEstimate:
         params = self.params
         camera = self.scene.camera
         rotation, position = camera_pose_from_pnp(fit.rvec, fit.tvec)
+        excluded = dict(excluded)
+        left_out = [i for i in ids_all if i not in fit.ids]
+        if left_out:
+            rows = [ids_all.index(i) for i in left_out]
+            projected, _ = _reprojection(
+                camera, self.scene.object_points(left_out), fit.rvec, fit.tvec
+            )
+            for landmark_id, row, point in zip(left_out, rows, projected, strict=True):
+                distance = float(np.linalg.norm(point - points_all[row]))
+                excluded[landmark_id] = f"outlier: {distance:.1f} px from the others' pose"
         errors = {landmark_id: math.nan for landmark_id in self.scene.landmark_ids}
         for landmark_id, error in zip(fit.ids, fit.errors, strict=True):
             errors[landmark_id] = float(error)
@@ -582,6 +634,7 @@ class Localizer:
                 reason="; ".join(reasons),
                 rms_error_px=fit.rms,
                 position_std_m=std,
+                excluded_landmarks=excluded,
             )
         self._prior = _Prior(frame_index, rotation, position)
         return PoseEstimate(
@@ -594,6 +647,7 @@ class Localizer:
             reason="",
             rms_error_px=fit.rms,
             position_std_m=std,
+            excluded_landmarks=excluded,
         )
 
     def _current_prior(self, frame_index: int) -> _Prior | None:
@@ -605,7 +659,9 @@ class Localizer:
             return None
         return prior
 
-    def _invalid(self, frame_index: int, reason: str) -> PoseEstimate:
+    def _invalid(
+        self, frame_index: int, reason: str, excluded: dict[str, str] | None = None
+    ) -> PoseEstimate:
         return PoseEstimate(
             frame_index=frame_index,
             valid=False,
@@ -614,6 +670,7 @@ class Localizer:
             reprojection_errors={i: math.nan for i in self.scene.landmark_ids},
             used_landmarks=(),
             reason=reason,
+            excluded_landmarks=dict(excluded or {}),
         )
 
 

@@ -63,5 +63,5 @@ def scale_patches(
     for factor in scale_factors:
         patch_size = np.maximum(np.floor(base_target_size_hw * factor), 2).astype(int)
         patch = crop_replicate(image, position, (patch_size[0], patch_size[1]))
-        samples.append(resize_auto(np.ascontiguousarray(patch), model_size_hw))
+        samples.append(resize_auto(patch, model_size_hw))
     return np.stack(samples)

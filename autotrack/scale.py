@@ -5,6 +5,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
+import scipy.fft
 
 from autotrack.features import scale_features
 from autotrack.params import TrackerParams
@@ -37,7 +38,7 @@ class ScaleFilter:
         self.scale_steps = params.scale_step ** (centre - np.arange(1, n + 1))
         offsets = np.arange(1, n + 1) - centre
         sigma = math.sqrt(n) * params.scale_sigma_factor
-        self.label_f = np.fft.fft(np.exp(-0.5 * offsets**2 / sigma**2)).astype(np.complex64)
+        self.label_f = scipy.fft.fft(np.exp(-0.5 * offsets**2 / sigma**2)).astype(np.complex64)
         if n % 2 == 0:
             window = symmetric_hann(n + 1)[1:]
         else:
@@ -72,9 +73,9 @@ class ScaleFilter:
         """Best scale index and the new (clamped) scale factor."""
         all_indices = np.arange(self.params.num_scales)
         self._samples = self._extract(image, position, scale, all_indices)
-        samples_f = np.fft.fft(self._samples, axis=0)
+        samples_f = scipy.fft.fft(self._samples, axis=0, workers=1)
         response = np.real(
-            np.fft.ifft(
+            scipy.fft.ifft(
                 np.sum(self._numerator * samples_f, axis=1)
                 / (self._denominator + self.params.scale_lambda)
             )
@@ -107,7 +108,7 @@ class ScaleFilter:
             samples = self._extract(image, position, scale, np.arange(self.params.num_scales))
         else:
             samples = self._shifted_samples(image, position, scale, best)
-        samples_f = np.fft.fft(samples, axis=0)
+        samples_f = scipy.fft.fft(samples, axis=0, workers=1)
         numerator = self.label_f[:, None] * np.conj(samples_f)
         denominator = np.sum(np.real(samples_f * np.conj(samples_f)), axis=1)
         rate = self.params.scale_learning_rate

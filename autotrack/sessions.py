@@ -15,7 +15,6 @@ from __future__ import annotations
 
 import base64
 import dataclasses
-import importlib.metadata
 import io
 import json
 import math
@@ -39,6 +38,7 @@ from mcap.records import Attachment, Channel, DataEnd, Message, Metadata, Schema
 from mcap.stream_reader import CRCValidationError, StreamReader
 from mcap.writer import CompressionType, Writer
 
+import autotrack
 from autotrack import foxglove
 from autotrack.errors import SessionError
 from autotrack.params import TrackerParams
@@ -60,8 +60,6 @@ TOPIC_POSE_QUALITY = "/camera/pose_quality"
 TOPIC_LANDMARKS = "/landmarks"
 TOPIC_EVENTS = "/events"
 TOPIC_IMAGE = "/camera/image"
-EVENT_KINDS = ("box_drawn", "box_corrected", "box_deleted")
-"""Event kinds the app records for box edits; other lower-case kinds are accepted too."""
 
 _MCAP_MAGIC = b"\x89MCAP0\r\n"
 _TARGET_ID = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.-]{0,63}$")
@@ -149,8 +147,7 @@ SESSION_EVENT_SCHEMA: dict[str, Any] = {
     "required": ["timestamp", "kind", "frame_index", "wall_time"],
 }
 
-# Schema name -> JSON Schema bytes (schema encoding "jsonschema", message encoding "json").
-_SCHEMAS: dict[str, bytes] = {
+SCHEMAS: dict[str, bytes] = {
     **{
         schema.full_name: foxglove.schema_bytes(schema)
         for schema in (
@@ -167,19 +164,8 @@ _SCHEMAS: dict[str, bytes] = {
         for schema in (TARGET_SIGNALS_SCHEMA, POSE_QUALITY_SCHEMA, SESSION_EVENT_SCHEMA)
     },
 }
-CHANNEL_SCHEMAS: dict[str, str] = {
-    "/targets/<id>/box": foxglove.IMAGE_ANNOTATIONS.full_name,
-    "/targets/<id>/signals": "autotrack.TargetSignals",
-    "/targets/<id>/response": foxglove.RAW_IMAGE.full_name,
-    "/targets/<id>/local_variation": foxglove.RAW_IMAGE.full_name,
-    TOPIC_POSE: foxglove.POSE_IN_FRAME.full_name,
-    TOPIC_TF: foxglove.FRAME_TRANSFORM.full_name,
-    TOPIC_POSE_QUALITY: "autotrack.PoseQuality",
-    TOPIC_LANDMARKS: foxglove.SCENE_UPDATE.full_name,
-    TOPIC_EVENTS: "autotrack.SessionEvent",
-    TOPIC_IMAGE: foxglove.COMPRESSED_IMAGE.full_name,
-}
-"""Topic (with `<id>` for a target id) -> schema name of the messages it carries."""
+"""Schema name -> JSON Schema document of every channel we write (schema encoding "jsonschema",
+message encoding "json")."""
 
 
 class PoseLike(Protocol):
@@ -287,10 +273,7 @@ def _check_target_id(target_id: str) -> str:
 
 
 def _package_version() -> str:
-    try:
-        return importlib.metadata.version("autotrack-studio")
-    except importlib.metadata.PackageNotFoundError:
-        return "unknown (autotrack-studio not installed)"
+    return autotrack.__version__
 
 
 def _params_dict(tracker_params: TrackerParams | Mapping[str, Any]) -> dict[str, Any]:
@@ -733,7 +716,7 @@ class SessionRecorder:
             schema_id = self._schema_ids.get(schema_name)
             if schema_id is None:
                 schema_id = self._writer.register_schema(
-                    schema_name, "jsonschema", _SCHEMAS[schema_name]
+                    schema_name, "jsonschema", SCHEMAS[schema_name]
                 )
                 self._schema_ids[schema_name] = schema_id
             channel_id = self._writer.register_channel(topic, "json", schema_id)

@@ -21,7 +21,7 @@ from __future__ import annotations
 import json
 import math
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 from pathlib import Path
 
 import cv2
@@ -834,7 +834,15 @@ class Renderer:
                 self._draw(canvas, plane, rotation_cw, position, extrinsic)
         return canvas
 
-    def _draw(self, canvas, plane: TexturedPlane, rotation_cw, position, extrinsic) -> None:
+    def _draw(
+        self,
+        canvas: np.ndarray,
+        plane: TexturedPlane,
+        rotation_cw: np.ndarray,
+        position: np.ndarray,
+        extrinsic: np.ndarray,
+    ) -> None:
+        """Warp one plane's texture into the canvas inside its visible (near-clipped) outline."""
         corners_camera = (plane.corners() - position) @ rotation_cw.T
         polygon_camera = _clip_near(corners_camera, NEAR_PLANE_M)
         if len(polygon_camera) < 3:
@@ -1147,11 +1155,6 @@ def read_ground_truth_boxes(folder: str | Path) -> dict[str, np.ndarray]:
     if not out:
         raise InputError(f"no groundtruth/<landmark>.txt files in {folder}")
     return out
-
-
-def scaled_settings(settings: RenderSettings, width: int) -> RenderSettings:
-    """The same settings at another 16:9 width."""
-    return replace(settings, width=width, height=round(width * 9 / 16))
 
 
 DEMO_README = """# Embedded demo

@@ -15,7 +15,7 @@ import numpy as np
 
 from autotrack import dcf, regularization
 from autotrack.errors import BoxError, InputError
-from autotrack.features import extract_features, is_grey, load_colour_table
+from autotrack.features import extract_features, feature_dim, is_grey, load_colour_table
 from autotrack.params import TrackerParams
 from autotrack.result import TrackResult
 from autotrack.sampling import search_patch
@@ -133,6 +133,8 @@ class AutoTrack:
 
         self.frame_number = 1
         search_box = self._search_box()
+        channels = feature_dim(p, colour=not self.grey)
+        self.transform = dcf.SpectrumTransform(channels, self.grid_size)
         xf = self._features_spectrum(image)
         self.filter_f = np.zeros_like(xf)
         self.filter_f, theta = self._train(xf, theta_start=0.0, theta_ref=0.0)
@@ -241,7 +243,7 @@ class AutoTrack:
         features = extract_features(patch, self.params, self.colour_table)
         windowed = np.empty((features.shape[2], *self.grid_size), dtype=np.float32)
         np.multiply(features.transpose(2, 0, 1), self.cos_window, out=windowed)
-        return dcf.to_spectrum(windowed)
+        return self.transform.forward(windowed)
 
     def _theta_update(self, theta_ref: float, filter_prev: np.ndarray):
         """Eq. 13 re-estimation of theta inside ADMM, in the variant chosen by the parameters."""
@@ -279,7 +281,7 @@ class AutoTrack:
         update = self._theta_update(theta_ref, self.filter_f)
         return dcf.train_filter(
             xf, self.label_f, self.filter_f, self.spatial_window, theta_start, self.admm,
-            self.grid_size, update,
+            self.transform, update,
         )
 
     def _target_size(self) -> np.ndarray:

@@ -59,6 +59,8 @@ class SequenceResult:
     floor_unflagged_large: int
     centre_error_px: dict[str, float]
     """Mean distance of the tracked box centre from the ground-truth box centre, per landmark."""
+    three_landmark_frames: int
+    """Trusted poses solved from three landmarks (one dropped as lost or drifting)."""
     seconds: float
 
 
@@ -129,6 +131,9 @@ def evaluate(folder: Path, preset_name: str) -> SequenceResult:
         tracked_unflagged_large=int(np.sum(tracked_errors.errors_cm > LARGE_ERROR_CM)),
         floor_unflagged_large=int(np.sum(floor_errors.errors_cm > LARGE_ERROR_CM)),
         centre_error_px=centre_error,
+        three_landmark_frames=sum(
+            r.pose.valid and len(r.pose.used_landmarks) == 3 for r in records
+        ),
         seconds=time.perf_counter() - start,
     )
 
@@ -157,10 +162,13 @@ def main(argv: list[str] | None = None) -> int:
     print(format_table3([(r.name, r.tracked) for r in results]))
     print("\nError floor (ground-truth boxes, no tracker)")
     print(format_table3([(r.name, r.floor) for r in results]))
-    print("\nTracked box centre vs ground-truth box centre, mean (px)")
+    print("\nTracked box centre vs ground-truth box centre, mean (px); three-landmark poses")
     for r in results:
         centres = "  ".join(f"{k} {v:5.2f}" for k, v in r.centre_error_px.items())
-        print(f"  {r.name:<20}{centres}   ({r.seconds:.0f} s)")
+        print(
+            f"  {r.name:<20}{centres}   3-landmark poses: {r.three_landmark_frames:3d}"
+            f"   ({r.seconds:.0f} s)"
+        )
     pooled = np.concatenate([r.tracked.errors_cm for r in results])
     overall = float(np.sqrt(np.mean(pooled**2)))
     unflagged = sum(r.tracked_unflagged_large for r in results)

@@ -317,7 +317,12 @@ def _wait_for(predicate, timeout: float = 30.0) -> None:
 
 def _drag(tab, box) -> None:
     """A shift-drag over `box` (frame pixels) as the browser reports it."""
-    _wait_for(lambda: tab.letterbox is not None)
+    _wait_for(
+        lambda: (
+            tab.letterbox is not None
+            and (tab.letterbox.frame_width, tab.letterbox.frame_height) == tab.run.frames.frame_size
+        )
+    )
     x, y, w, h = box
     corner_min = tab.letterbox.frame_to_screen(x, y)
     corner_max = tab.letterbox.frame_to_screen(x + w, y + h)
@@ -397,6 +402,26 @@ def test_playing_tracks_every_target_and_estimates_poses(studio) -> None:
     _wait_for(lambda: (data := tab.plots.data_of(0)) is not None and len(data[0]) == last + 1)
 
 
+def test_map_panels_show_each_targets_response_and_local_variation(studio) -> None:
+    tab, _ = _open_tab(studio)
+    _draw_demo_boxes(tab)
+    tab.frame_slider.value = 4  # local variation exists from the third frame on
+    assert tab.wait_idle()
+
+    tab.maps_dropdown.value = "panels (per target)"
+    assert tab.wait_idle()
+    _wait_for(lambda: len(tab._map_panels) == 4 and tab.stats.map_panel_updates >= 4)
+    assert tab.maps_folder.visible
+    panel = tab._map_panels["T1"].image
+    half = panel.shape[1] // 2
+    assert panel[:, :half].std() > 0 and panel[:, half + 4 :].std() > 0  # both maps drawn
+
+    tab.maps_dropdown.value = "off"
+    assert tab.wait_idle()
+    _wait_for(lambda: not tab._map_panels)
+    assert not tab.maps_folder.visible
+
+
 def test_slider_tracks_up_to_the_chosen_frame_and_stepping_back_replays(studio) -> None:
     tab, _ = _open_tab(studio)
     _draw_demo_boxes(tab)
@@ -439,6 +464,11 @@ def test_correcting_a_box_retracks_that_target_from_there(studio) -> None:
         assert t2.results[frame_index] is before["T2"][frame_index]  # earlier ones kept
     for other in ("T1", "T3", "T4"):
         assert run.targets[other].results == before[other]  # untouched
+    run.recorder.flush()
+    recorded = open_session(run.session_path)
+    assert np.isnan(recorded.tracks["T2"][6:8]).all()  # superseded in the file too
+    assert np.isfinite(recorded.tracks["T1"][6:8]).all()
+    assert not recorded.poses.valid[recorded.poses.frame_indices >= 6].any()
 
     tab.frame_slider.value = 8
     assert tab.wait_idle()
@@ -447,13 +477,15 @@ def test_correcting_a_box_retracks_that_target_from_there(studio) -> None:
         assert run.targets[other].results[7] is before[other][7]  # not re-tracked
 
     run.recorder.flush()
-    events = open_session(run.session_path).events
+    recorded = open_session(run.session_path)
+    np.testing.assert_allclose(recorded.tracks["T2"][7], t2.results[7].box)
+    events = recorded.events
     corrections = [e for e in events if e.kind == "box_corrected"]
     assert [(e.target_id, e.frame_index) for e in corrections] == [("T2", 5)]
 
 
 def test_typed_box_landmark_and_delete(studio) -> None:
-    tab, _ = _open_tab(studio)
+    tab, channel = _open_tab(studio)
     _draw_demo_boxes(tab)
 
     tab.box_text.value = "10, 20, 30, 40"
@@ -483,7 +515,15 @@ def test_typed_box_landmark_and_delete(studio) -> None:
     tab.box_text.value = "ten, 20, 30"
     _click(tab.apply_box_button)
     assert tab.wait_idle()
-    assert "x, y, w, h" in tab._message
+    assert "x, y, w, h" in channel.notes[-1][0]
+
+    tab.box_text.value = "5000, 5000, 30, 30"  # outside the frame: the tracker refuses it
+    _click(tab.apply_box_button)
+    assert tab.wait_idle()
+    assert channel.notes[-1][1] and list(run.targets) == ["T1", "T2", "T3", "T4"]
+    tab.frame_slider.value = 3
+    assert tab.wait_idle()
+    assert run.tracked_until == 2  # nothing half-made is left to break tracking
 
 
 def test_downloads_hold_tracks_poses_and_the_session(studio) -> None:
@@ -578,6 +618,40 @@ def test_uploaded_zip_opens_as_a_sequence(studio) -> None:
     assert tab.run.frame_count == 3 and tab.run.scene is None
     assert tab.sequence_path.is_relative_to(studio.config.upload_dir.resolve())
     assert any("uploads" in name for name in tab.sequence_dropdown.options)
+
+
+def test_shared_benchmark_sequence_opens_by_typed_path_and_tracks(tmp_path: Path) -> None:
+    if not SHARED_SEQUENCES.is_dir():
+        pytest.skip("../shared/data/sequences is not present")
+    from app.server import AppConfig, StudioServer
+
+    studio = StudioServer(
+        AppConfig(
+            sequence=(SHARED_SEQUENCES / "OTB" / "Crossing").resolve(),
+            port=_free_port(),
+            sessions_dir=tmp_path / "sessions",
+            allowed_roots=(SHARED_SEQUENCES.resolve(),),
+        )
+    )
+    try:
+        tab, _ = _open_tab(studio)
+        assert tab.run.frames.name == "Crossing" and tab.run.scene is None
+        tab.path_text.value = "UAV123_10fps/boat5"
+        _click(tab.open_path_button)
+        assert tab.wait_idle()
+        assert tab.run.frames.name == "boat5" and not tab.boxes_json_button.visible
+        first = np.loadtxt(
+            SHARED_SEQUENCES / "UAV123_10fps" / "boat5" / "groundtruth_rect.txt", delimiter=","
+        )[0]
+        _drag(tab, tuple(first - [1, 1, 0, 0]))
+        _click(tab.step_button)
+        _click(tab.step_button)
+        assert tab.wait_idle()
+        target = tab.run.targets["T1"]
+        assert target.landmark_id is None and sorted(target.results) == [0, 1, 2]
+        assert not tab.run.poses
+    finally:
+        studio.stop()
 
 
 def test_cli_refuses_a_missing_sequence_in_one_line(capsys, tmp_path: Path) -> None:

@@ -52,7 +52,8 @@ def test_h_step_equals_its_definition_on_the_full_spectrum():
     gamma, lam = 100.0, 1.0
     g_half = dcf.to_spectrum(g_space.astype(np.float32))
     l_half = dcf.to_spectrum(l_space.astype(np.float32))
-    h_half = dcf.solve_h_step(g_half, l_half, window.astype(np.float32), gamma, lam, grid)
+    transform = dcf.SpectrumTransform(channels, grid)
+    h_half = dcf.solve_h_step(g_half, l_half, window.astype(np.float32), gamma, lam, transform)
 
     # Definition (paper eq. 12, release form): h = T / (lambda u^2 + gamma T) * ifft2(gamma (g + l)).
     g_full = np.fft.fft2(g_space)

@@ -110,6 +110,7 @@ def test_lost_landmark_keeps_a_three_point_pose():
         pose = localizer.estimate(frame, points)
         assert pose.valid, pose.reason
         assert pose.used_landmarks == ("A", "B", "D")
+        assert pose.excluded_landmarks == {"C": "lost"}
         assert math.isnan(pose.reprojection_errors["C"])
         assert np.linalg.norm(pose.position - positions[frame]) < 1e-3
 
@@ -155,6 +156,11 @@ def test_drifting_landmark_is_dropped_when_a_previous_pose_says_which():
     assert pose.valid, pose.reason
     assert pose.used_landmarks == ("A", "B", "C")
     assert np.linalg.norm(pose.position - positions[1]) < 1e-3
+    # The outlier's distance from where the trusted pose puts it: the injected 40, -15 px.
+    assert (
+        pose.excluded_landmarks["D"]
+        == f"outlier: {math.hypot(40, 15):.1f} px from the others' pose"
+    )
     # Without a previous pose the same frame cannot be trusted.
     fresh = Localizer(SCENE).estimate(1, points)
     assert not fresh.valid and "disagree" in fresh.reason
@@ -168,6 +174,23 @@ def test_low_peak_score_drops_the_landmark():
     scores = {"A": 0.6, "B": 0.05, "C": 0.5, "D": math.nan}
     pose = localizer.estimate(1, exact_points(rotations[1], positions[1]), confidences=scores)
     assert pose.valid and pose.used_landmarks == ("A", "C", "D")
+
+
+def test_collapsing_peak_score_drops_the_landmark():
+    rotations, positions = poses_along("circle")
+    localizer = Localizer(SCENE)
+    steady = {landmark: 0.04 for landmark in IDS}
+    for frame in range(8):
+        pose = localizer.estimate(frame, exact_points(rotations[frame], positions[frame]), steady)
+        assert pose.used_landmarks == IDS
+    collapsed = {**steady, "C": 0.006}
+    pose = localizer.estimate(8, exact_points(rotations[8], positions[8]), collapsed)
+    assert pose.valid and pose.used_landmarks == ("A", "B", "D")
+    assert pose.excluded_landmarks["C"] == "peak 0.006 < 0.3 x its median 0.04"
+    # A moderate dip (blur, lighting) keeps the landmark.
+    dipped = {**steady, "C": 0.02}
+    pose = localizer.estimate(9, exact_points(rotations[9], positions[9]), dipped)
+    assert pose.used_landmarks == IDS
 
 
 def test_aberrant_landmark_is_down_weighted():
@@ -367,7 +390,7 @@ def test_cli_localize_writes_tum_and_csv_and_prints_table3(short_sequence, tmp_p
     )
     printed = capsys.readouterr().out
     assert code == 0
-    assert "frames: 30  valid poses: 30" in printed
+    assert "frames: 30  valid poses: 30 (0 from three landmarks)" in printed
     assert "x(cm)" in printed and "RMSE" in printed and "more than 20 cm off: 0" in printed
     stamps, positions, _ = read_tum(out)
     assert len(stamps) == 30 and stamps[1] == pytest.approx(0.1)

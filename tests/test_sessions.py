@@ -297,10 +297,11 @@ def test_quantise_map_keeps_the_range_and_handles_constant_maps() -> None:
 
 
 def test_real_tracker_run_round_trips(tmp_path: Path) -> None:
-    tracker = pytest.importorskip("autotrack.tracker")
+    from autotrack.tracker import AutoTrack
+
     frames, boxes = _generated_sequence(12)
     params = TrackerParams()
-    trackers = {"a": tracker.AutoTrack(params), "b": tracker.AutoTrack(params)}
+    trackers = {"a": AutoTrack(params), "b": AutoTrack(params)}
     expected: dict[str, list[TrackResult]] = {"a": [], "b": []}
     with SessionRecorder(
         tmp_path / "real.mcap", source="generated", tracker_params=params, fps=30.0
@@ -349,6 +350,60 @@ def _generated_sequence(count: int) -> tuple[list[np.ndarray], dict[str, tuple]]
         for target_id, patch in patches.items()
     }
     return frames, boxes
+
+
+def test_localization_run_round_trips_through_export(
+    tmp_path: Path, capsys: pytest.CaptureFixture
+) -> None:
+    """A real localisation run (synthetic test bed): recorded tracks and PoseEstimates come back
+    out of `session export` as the pipeline's own boxes and TUM trajectory."""
+    from autotrack.frames import open_frames
+    from autotrack.localize import localize_sequence, read_tum, write_tum
+    from autotrack.scene import load_scene
+    from autotrack.synthetic import RenderSettings, SequenceSpec, render_sequence
+
+    spec = SequenceSpec("s", "circle", 8, 0, RenderSettings(width=640, height=360), period_s=45.0)
+    folder = render_sequence(tmp_path / "synthetic", spec)
+    scene = load_scene(folder / "scene.json")
+    boxes = json.loads((folder / "boxes.json").read_text())
+    frames = open_frames(folder / "img")
+    outputs = []
+    with SessionRecorder(
+        tmp_path / "localize.mcap",
+        source=str(folder),
+        tracker_params=TrackerParams(),
+        scene_path=folder / "scene.json",
+        fps=10.0,
+    ) as recorder:
+        recorder.log_landmarks(scene)
+        for output in localize_sequence(frames, scene, boxes, TrackerParams()):
+            for landmark_id, result in output.tracks.items():
+                recorder.log_target(landmark_id, result, landmark_id=landmark_id)
+            recorder.log_pose(output.pose)
+            outputs.append(output)
+    assert any(o.pose.valid for o in outputs)
+    out = tmp_path / "export"
+    argv = ["session", "export", str(tmp_path / "localize.mcap"), "--tracks", str(out)]
+    assert main([*argv, "--poses", str(out / "poses.tum")]) == 0
+    capsys.readouterr()
+    for landmark_id in boxes:
+        expected = np.array([o.tracks[landmark_id].box for o in outputs])
+        np.testing.assert_allclose(read_boxes(out / f"{landmark_id}.txt"), expected, atol=1e-4)
+    valid = [o.pose for o in outputs if o.pose.valid]
+    write_tum(
+        tmp_path / "direct.tum",
+        [p.frame_index / 10.0 for p in valid],
+        np.array([p.position for p in valid]),
+        np.array([p.quaternion_xyzw() for p in valid]),
+    )
+    for exported, direct in zip(
+        read_tum(out / "poses.tum"), read_tum(tmp_path / "direct.tum"), strict=True
+    ):
+        np.testing.assert_array_equal(exported, direct)
+    session = open_session(tmp_path / "localize.mcap")
+    assert session.landmark_ids == {landmark_id: landmark_id for landmark_id in boxes}
+    assert set(session.landmarks) == set(scene.landmark_ids)
+    assert session.poses.reasons == tuple(o.pose.reason for o in outputs)
 
 
 # --- the files are valid MCAP with the Foxglove schemas ---------------------------------------
@@ -441,7 +496,7 @@ def test_mcap_reader_validates_file_and_channels_use_the_claimed_schemas(
 
 
 def test_foxglove_schemas_have_the_well_known_fields() -> None:
-    pose = json.loads(sessions._SCHEMAS["foxglove.PoseInFrame"])
+    pose = json.loads(sessions.SCHEMAS["foxglove.PoseInFrame"])
     assert set(pose["properties"]) == {"timestamp", "frame_id", "pose"}
     assert pose["properties"]["timestamp"]["properties"]["nsec"]["maximum"] == 999_999_999
     assert set(pose["properties"]["pose"]["properties"]["orientation"]["properties"]) == {
@@ -450,7 +505,7 @@ def test_foxglove_schemas_have_the_well_known_fields() -> None:
         "z",
         "w",
     }
-    transform = json.loads(sessions._SCHEMAS["foxglove.FrameTransform"])
+    transform = json.loads(sessions.SCHEMAS["foxglove.FrameTransform"])
     assert set(transform["properties"]) == {
         "timestamp",
         "parent_frame_id",
@@ -458,17 +513,17 @@ def test_foxglove_schemas_have_the_well_known_fields() -> None:
         "translation",
         "rotation",
     }
-    raw = json.loads(sessions._SCHEMAS["foxglove.RawImage"])
+    raw = json.loads(sessions.SCHEMAS["foxglove.RawImage"])
     assert raw["properties"]["data"] == {
         "type": "string",
         "contentEncoding": "base64",
         "description": "Raw image data",
     }
-    annotations = json.loads(sessions._SCHEMAS["foxglove.ImageAnnotations"])
+    annotations = json.loads(sessions.SCHEMAS["foxglove.ImageAnnotations"])
     points = annotations["properties"]["points"]["items"]
     assert points["title"] == "foxglove.PointsAnnotation"
     assert [o["title"] for o in points["properties"]["type"]["oneOf"]][2] == "LINE_LOOP"
-    scene = json.loads(sessions._SCHEMAS["foxglove.SceneUpdate"])
+    scene = json.loads(sessions.SCHEMAS["foxglove.SceneUpdate"])
     entity = scene["properties"]["entities"]["items"]["properties"]
     assert {"spheres", "texts", "cubes", "lines", "models", "lifetime"} <= set(entity)
 

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import signal
 import threading
 from pathlib import Path
 
@@ -64,9 +65,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     parser.set_defaults(func=run)
 
 
-def startup_roots(
-    sequence: Path | None, scene: Path | None, allow_roots: list[Path]
-) -> list[Path]:
+def startup_roots(sequence: Path | None, scene: Path | None, allow_roots: list[Path]) -> list[Path]:
     """The folders a browser may open: the --allow-root folders plus the folders holding the
     start-up sequence and scene. Each must exist."""
     roots: list[Path] = []
@@ -117,8 +116,11 @@ def run(args: argparse.Namespace) -> int:
             flush=True,
         )
     print(f"sessions are recorded in {config.sessions_dir.resolve()}; Ctrl-C stops", flush=True)
+    stopped = threading.Event()
+    # A service manager's SIGTERM also closes the tabs, so every recording is finished.
+    signal.signal(signal.SIGTERM, lambda _signum, _frame: stopped.set())
     try:
-        threading.Event().wait()
+        stopped.wait()
     finally:
         studio.stop()
     return 0

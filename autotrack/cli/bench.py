@@ -27,18 +27,26 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument(
         "--trackers",
         default=DEFAULT_TRACKERS,
+        metavar="NAMES",
         help=f"comma-separated tracker names (default: {DEFAULT_TRACKERS})",
     )
     parser.add_argument(
-        "--jobs", type=int, default=1, help="sequences tracked in parallel processes (default 1)"
+        "--jobs",
+        type=int,
+        default=1,
+        metavar="N",
+        help="sequences tracked in parallel processes (default 1)",
     )
     parser.add_argument(
         "--out",
         type=Path,
+        metavar="DIR",
         default=Path("results"),
         help="results folder (default: ./results); also used to resume an interrupted run",
     )
-    parser.add_argument("--json", type=Path, help="write a machine-readable summary to this file")
+    parser.add_argument(
+        "--json", type=Path, metavar="FILE", help="write a machine-readable summary to this file"
+    )
     parser.add_argument(
         "--plots", action="store_true", help="write precision/success plots to DIR/plots/"
     )
@@ -47,6 +55,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
         "--colour-table",
         dest="colour_table",
         type=Path,
+        metavar="PATH",
         help="published Color Names table (32768 x 10, .npy or .mat) for the AutoTrack variants",
     )
     parser.add_argument("--no-progress", action="store_true", help="hide the progress bar")

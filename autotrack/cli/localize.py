@@ -167,7 +167,7 @@ def run_localize(args: argparse.Namespace) -> int:
             records.append(record)
             progress.update()
     timestamps = np.arange(len(records)) / fps
-    report = summarise(records, timestamps, scene, args.out, args.tracks, gt)
+    report = summarise(records, timestamps, scene, args.out, args.tracks, gt, frames.name)
     print(report)
     return 0
 
@@ -179,14 +179,19 @@ def summarise(
     out: Path | None,
     tracks: Path | None,
     gt: tuple[np.ndarray, np.ndarray, np.ndarray] | None,
+    name: str,
 ) -> str:
-    """Write the requested files and return the text report."""
+    """Write the requested files and return the text report (`name` labels the Table-3 row)."""
     from autotrack.localize import format_table3, trajectory_errors, write_tum
 
     positions = np.array([r.pose.position for r in records]).reshape(-1, 3)
     quaternions = np.array([r.pose.quaternion_xyzw() for r in records]).reshape(-1, 4)
     valid = sum(r.pose.valid for r in records)
-    lines = [f"frames: {len(records)}  valid poses: {valid}  invalid: {len(records) - valid}"]
+    three = sum(r.pose.valid and len(r.pose.used_landmarks) == 3 for r in records)
+    lines = [
+        f"frames: {len(records)}  valid poses: {valid} ({three} from three landmarks)  "
+        f"invalid: {len(records) - valid}"
+    ]
     if out is not None:
         out.parent.mkdir(parents=True, exist_ok=True)
         written = write_tum(out, timestamps, positions, quaternions)
@@ -198,24 +203,21 @@ def summarise(
     if gt is not None:
         gt_times, gt_positions, _ = gt
         errors = trajectory_errors(timestamps, positions, gt_times, gt_positions)
-        lines.append(format_table3([(records_name(out), errors)]))
+        lines.append(format_table3([(name, errors)]))
         large = int(np.sum(errors.errors_cm > LARGE_ERROR_CM))
         lines.append(f"valid frames more than {LARGE_ERROR_CM:g} cm off: {large}")
     return "\n".join(lines)
 
 
-def records_name(out: Path | None) -> str:
-    return out.stem if out is not None else "sequence"
-
-
 def write_tracks_csv(
     path: Path, records: Sequence[Any], timestamps: np.ndarray, scene: Scene
 ) -> None:
-    """One row per frame: pose (NaN when invalid), validity and reason, and per landmark its
-    box, peak score, aberrance flag and reprojection error."""
+    """One row per frame: pose (NaN when invalid), validity, landmarks used and left out (why),
+    reason when invalid, and per landmark its box, peak score, aberrance flag and reprojection
+    error."""
     ids = scene.landmark_ids
     header = ["frame", "timestamp", "valid", "tx", "ty", "tz", "qx", "qy", "qz", "qw"]
-    header += ["rms_px", "position_std_m", "used", "reason"]
+    header += ["rms_px", "position_std_m", "used", "excluded", "reason"]
     for landmark_id in ids:
         header += [
             f"{landmark_id}_{k}" for k in ("x", "y", "w", "h", "peak", "aberrant", "error_px")
@@ -229,7 +231,8 @@ def write_tracks_csv(
             row += [f"{v:.6f}" for v in pose.position]
             row += [f"{v:.6f}" for v in pose.quaternion_xyzw()]
             row += [f"{pose.rms_error_px:.3f}", f"{pose.position_std_m:.4f}"]
-            row += [" ".join(pose.used_landmarks), pose.reason]
+            excluded = "; ".join(f"{k} {why}" for k, why in pose.excluded_landmarks.items())
+            row += [" ".join(pose.used_landmarks), excluded, pose.reason]
             for landmark_id in ids:
                 track = record.tracks.get(landmark_id)
                 if track is None:

@@ -1,0 +1,109 @@
+"""`autotrack track`: output convention, scores, and one clear line for every bad input."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+from pathlib import Path
+
+import cv2
+import numpy as np
+import pytest
+
+from autotrack.cli import main
+from autotrack.datasets import read_boxes
+from tests.sequences import moving_target_sequence
+
+
+@pytest.fixture(scope="module")
+def sequence_folder(tmp_path_factory) -> Path:
+    generated = moving_target_sequence(num_frames=20)
+    folder = tmp_path_factory.mktemp("seq") / "mover"
+    (folder / "img").mkdir(parents=True)
+    for index, frame in enumerate(generated.frames):
+        cv2.imwrite(str(folder / "img" / f"{index + 1:04d}.png"), frame[:, :, ::-1])
+    one_based = generated.boxes + np.array([1, 1, 0, 0])
+    np.savetxt(folder / "groundtruth_rect.txt", one_based, fmt="%.3f", delimiter=",")
+    return folder
+
+
+def test_track_writes_one_based_boxes_and_prints_scores(sequence_folder, tmp_path, capsys):
+    out = tmp_path / "boxes.txt"
+    assert main(["track", str(sequence_folder), "--out", str(out), "--quiet"]) == 0
+    printed = capsys.readouterr().out
+    assert "frames: 20" in printed and "fps:" in printed
+    assert "precision@20px: 1.000" in printed and "success AUC:" in printed
+    boxes = read_boxes(out)  # read back to 0-based
+    truth = read_boxes(sequence_folder / "groundtruth_rect.txt")
+    assert boxes.shape == (20, 4)
+    # The release's first box sits within half a pixel of the ground truth it was given.
+    np.testing.assert_allclose(boxes[0], truth[0], atol=1.0)
+
+
+def test_track_with_explicit_init_on_a_plain_image_folder(sequence_folder, tmp_path, capsys):
+    truth = np.loadtxt(sequence_folder / "groundtruth_rect.txt", delimiter=",")
+    init = ",".join(f"{v:.1f}" for v in truth[0])
+    assert main(["track", str(sequence_folder / "img"), "--init", init, "--quiet"]) == 0
+    assert "precision" not in capsys.readouterr().out  # no ground truth beside a plain folder
+
+
+def _error_line(capsys) -> str:
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "Traceback" not in err[0]
+    return err[0]
+
+
+def test_missing_and_empty_folders(tmp_path, capsys):
+    assert main(["track", str(tmp_path / "nope")]) == 2
+    assert "no such file" in _error_line(capsys)
+    (tmp_path / "empty").mkdir()
+    assert main(["track", str(tmp_path / "empty"), "--init", "1,1,5,5"]) == 2
+    assert "no image files" in _error_line(capsys)
+
+
+def test_corrupt_frame_in_the_middle_names_the_frame(sequence_folder, tmp_path, capsys):
+    broken = tmp_path / "broken"
+    (broken / "img").mkdir(parents=True)
+    for index, path in enumerate(sorted((sequence_folder / "img").iterdir())[:8]):
+        data = path.read_bytes() if index != 5 else b"not a png at all"
+        (broken / "img" / path.name).write_bytes(data)
+    lines = (sequence_folder / "groundtruth_rect.txt").read_text().splitlines()[:8]
+    (broken / "groundtruth_rect.txt").write_text("\n".join(lines) + "\n")
+    assert main(["track", str(broken), "--quiet"]) == 2
+    line = _error_line(capsys)
+    assert "frame 5" in line and "0006.png" in line
+
+
+@pytest.mark.parametrize(
+    ("init", "message"),
+    [
+        ("1,2,3", "four numbers"),
+        ("a,b,c,d", "four numbers"),
+        ("10,10,0,10", "zero size"),
+        ("5000,10,20,20", "outside"),
+    ],
+)
+def test_bad_init_boxes(sequence_folder, capsys, init, message):
+    assert main(["track", str(sequence_folder), "--init", init, "--quiet"]) == 2
+    assert message in _error_line(capsys)
+
+
+def test_unreadable_video_and_missing_colour_table(tmp_path, sequence_folder, capsys):
+    video = tmp_path / "clip.mp4"
+    video.write_bytes(b"\x00" * 64)
+    assert main(["track", str(video), "--init", "1,1,5,5"]) == 2
+    assert "video" in _error_line(capsys)
+    missing = tmp_path / "cn.npy"
+    assert main(["track", str(sequence_folder), "--color-names", str(missing)]) == 2
+    assert "not found" in _error_line(capsys)
+
+
+def test_console_script_exits_non_zero_without_traceback(tmp_path):
+    completed = subprocess.run(
+        [sys.executable, "-m", "autotrack.cli", "track", str(tmp_path / "missing")],
+        capture_output=True,
+        text=True,
+        check=False,
+    )
+    assert completed.returncode == 2
+    assert "Traceback" not in completed.stderr and "no such file" in completed.stderr
