@@ -17,23 +17,29 @@ import viser
 import viser.uplot
 
 ABERRANT_COLOUR = "#e03131"
-X_SCALE: viser.uplot.Scale = {"time": False}
-"""Frames, not timestamps, on the x axis."""
+
+
+def x_scale(frame_count: int) -> viser.uplot.Scale:
+    """Frame indices (not timestamps) over the whole sequence, so the charts fill up as the
+    run advances and a step back does not rescale them."""
+    return {"time": False, "range": (0.0, float(max(1, frame_count - 1)))}
 
 
 def y_range(
     arrays: Sequence[np.ndarray], current: tuple[float, float] | None
 ) -> tuple[float, float]:
-    """A y range holding every finite value and `current`, with 10% headroom, rounded
-    outward to a step of a tenth of its span's order of magnitude."""
+    """`current` if it holds every finite value, else a range holding both with 10% headroom,
+    rounded outward to a tenth of the span's order of magnitude ((-0.1, 1.1) before any
+    value)."""
     finite = [values[np.isfinite(values)] for values in arrays]
     values = np.concatenate(finite) if finite else np.zeros(0)
     if values.size == 0:
-        low, high = (0.0, 1.0) if current is None else current
-    else:
-        low, high = float(values.min()), float(values.max())
-        if current is not None:
-            low, high = min(low, current[0]), max(high, current[1])
+        return (-0.1, 1.1) if current is None else current
+    low, high = float(values.min()), float(values.max())
+    if current is not None:
+        if current[0] <= low and high <= current[1]:
+            return current
+        low, high = min(low, current[0]), max(high, current[1])
     span = max(high - low, 1e-6, 1e-3 * max(abs(low), abs(high)))
     low, high = low - 0.1 * span, high + 0.1 * span
     step = 10.0 ** np.floor(np.log10(span)) / 10.0
@@ -54,6 +60,8 @@ class SignalHistory:
     """Aberrance threshold on the global variation."""
     last_frame: int
     """Last frame with any value (-1: nothing yet)."""
+    frame_count: int
+    """Frames in the sequence (the x axis spans them all)."""
 
 
 def _css(colour: tuple[int, int, int]) -> str:
@@ -92,7 +100,8 @@ class SignalPlots:
 
     def __init__(self, gui: viser.GuiApi) -> None:
         self.gui = gui
-        self._target_ids: tuple[str, ...] | None = None
+        self._layout: tuple[tuple[str, ...], int] | None = None
+        """Target ids and frame count the charts were built for."""
         self._handles: list[viser.GuiUplotHandle] = []
         self._ranges: list[tuple[float, float] | None] = []
         self._folder = gui.add_folder("Plots", expand_by_default=True)
@@ -102,6 +111,7 @@ class SignalPlots:
             handle.remove()
         colours = [_css(colour) for colour in history.colours]
         ids = history.target_ids
+        x_axis = x_scale(history.frame_count)
         empty = np.zeros(1)
         x_series = viser.uplot.Series(label="frame")
         with self._folder:
@@ -113,7 +123,7 @@ class SignalPlots:
                     _markers("aberrant"),
                 ),
                 title="Peak score",
-                scales={"x": X_SCALE},
+                scales={"x": x_axis},
                 aspect=2.0,
             )
             variation = self.gui.add_uplot(
@@ -125,7 +135,7 @@ class SignalPlots:
                     _markers("aberrant"),
                 ),
                 title="Global variation η vs threshold φ",
-                scales={"x": X_SCALE},
+                scales={"x": x_axis},
                 aspect=2.0,
             )
             theta_series: list[viser.uplot.Series] = []
@@ -136,19 +146,19 @@ class SignalPlots:
                 data=(empty, *[empty] * (2 * len(ids))),
                 series=(x_series, *theta_series),
                 title="θ_ref (dashed) and θ",
-                scales={"x": X_SCALE},
+                scales={"x": x_axis},
                 aspect=2.0,
             )
             fps = self.gui.add_uplot(
                 data=(empty, empty),
                 series=(x_series, _line("fps", "#1971c2")),
                 title="Tracking speed (frames/s)",
-                scales={"x": X_SCALE},
+                scales={"x": x_axis},
                 aspect=2.5,
             )
         self._handles = [peak, variation, theta, fps]
         self._ranges = [None] * len(self._handles)
-        self._target_ids = ids
+        self._layout = (ids, history.frame_count)
 
     def update(self, history: SignalHistory) -> None:
         """Send the latest values (rebuilding the charts when the target list changed)."""
@@ -156,9 +166,9 @@ class SignalPlots:
             for handle in self._handles:
                 handle.remove()
             self._handles = []
-            self._target_ids = ()
+            self._layout = None
             return
-        if history.target_ids != self._target_ids:
+        if (history.target_ids, history.frame_count) != self._layout:
             self._build(history)
         count = max(history.last_frame + 1, 1)
         frames = np.arange(count, dtype=np.float64)
@@ -186,7 +196,10 @@ class SignalPlots:
         for index, (handle, series) in enumerate(zip(self._handles, charts, strict=True)):
             span = y_range(series, self._ranges[index])
             if span != self._ranges[index]:
-                handle.scales = {"x": X_SCALE, "y": {"auto": False, "range": span}}
+                handle.scales = {
+                    "x": x_scale(history.frame_count),
+                    "y": {"auto": False, "range": span},
+                }
                 self._ranges[index] = span
             handle.data = (frames, *series)
 

@@ -239,7 +239,7 @@ class Tab:
                 min=1,
                 max=30,
                 step=1,
-                initial_value=int(round(self.config.canvas_fps)),
+                initial_value=min(30, max(1, round(self.config.canvas_fps))),
             )
         self.maps_folder = gui.add_folder("Maps", visible=False)
         with gui.add_folder("Session", expand_by_default=False):
@@ -736,6 +736,7 @@ class Tab:
             frame_seconds=run.frame_seconds.copy(),
             phi=run.params.phi,
             last_frame=run.furthest_frame,
+            frame_count=run.frame_count,
         )
         status = self._status_text(run, pose_view)
         with self._view_lock:
@@ -795,7 +796,6 @@ class Tab:
                     if due and min(due) <= now:
                         break
                     self._view_lock.wait(None if not due else min(due) - now)
-            assert view is not None or mode != mode_shown
             try:
                 if mode != mode_shown:
                     self._show_canvas_mode(mode)

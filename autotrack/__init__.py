@@ -13,7 +13,6 @@ from autotrack.params import PRESETS, TrackerParams, preset
 from autotrack.result import TrackResult
 
 
-
 def __getattr__(name: str):
     # The tracker pulls in numba-compiled features: import it on first use only, so that
     # `autotrack.frames`, `autotrack.evaluation` etc. stay light to import.

@@ -114,7 +114,7 @@ class AdmmSettings:
     gamma_max: float
 
 
-@njit(cache=True, fastmath=False)
+@njit(cache=True, nogil=True, fastmath=False)
 def _g_step_kernel(xf, yf, h_f, l_f, g_prev, s_xx, s_gx_prev, gamma, theta, num_cells, g_out):
     # Loops run channel-outermost so every array is read contiguously.
     channels, rows, cols = xf.shape
@@ -239,9 +239,7 @@ def detection_response(g_f: np.ndarray, zf: np.ndarray, grid_size: tuple[int, in
     return from_spectrum(response_f, grid_size)
 
 
-def newton_peak(
-    response: np.ndarray, iterations: int
-) -> tuple[float, float, float]:
+def newton_peak(response: np.ndarray, iterations: int) -> tuple[float, float, float]:
     """Sub-pixel peak of a response map by Newton's method on its Fourier series.
 
     Starts at the integer maximum; keeps it if Newton lowers the interpolated score.

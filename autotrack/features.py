@@ -96,7 +96,7 @@ def _check_cell(cell_size: int) -> int:
     return int(cell_size)
 
 
-@njit(cache=True, fastmath=False, error_model="numpy")
+@njit(cache=True, nogil=True, fastmath=False, error_model="numpy")
 def _cell_means(values, cell, out):
     """Block means of (H, W, K) values into (H//cell, W//cell, K), accumulated in float32."""
     rows, cols, depth = out.shape
@@ -171,7 +171,7 @@ def grey_feature(patch: np.ndarray, cell_size: int) -> np.ndarray:
 # -- colour lookup tables ------------------------------------------------------------------------
 
 
-@njit(cache=True, fastmath=False, error_model="numpy")
+@njit(cache=True, nogil=True, fastmath=False, error_model="numpy")
 def _lookup_cell_average(patch, table, cell, out):
     """Cell means of table[R//8 + 32 (G//8) + 1024 (B//8)] over an RGB uint8 patch."""
     rows, cols, depth = out.shape

@@ -71,7 +71,7 @@ def acos_table() -> np.ndarray:
     return table
 
 
-@njit(cache=True, fastmath=False, error_model="numpy")
+@njit(cache=True, nogil=True, fastmath=False, error_model="numpy")
 def _bin_coordinates(n_pixels, cell):
     """Per pixel: left/top cell index (-1 before the first centre) and fractional offset.
 
@@ -89,7 +89,7 @@ def _bin_coordinates(n_pixels, cell):
     return first, frac
 
 
-@njit(cache=True, fastmath=False, error_model="numpy")
+@njit(cache=True, nogil=True, fastmath=False, error_model="numpy")
 def _planar_float32(image):
     """(H, W, C) of any real dtype -> C-contiguous float32 (C, H, W), as `single(I)` does."""
     height, width, channels = image.shape
@@ -113,7 +113,7 @@ def _planar_float32(image):
     return planes
 
 
-@njit(cache=True, fastmath=False, error_model="numpy")
+@njit(cache=True, nogil=True, fastmath=False, error_model="numpy")
 def _row_gradients(plane, y, gx, gy):
     """gradient2 on one row: centred differences, one-sided with factor 1 at the image border.
 
@@ -136,7 +136,7 @@ def _row_gradients(plane, y, gx, gy):
         gx[cols - 1] = row[width - 1] - row[width - 2]
 
 
-@njit(cache=True, fastmath=False, error_model="numpy")
+@njit(cache=True, nogil=True, fastmath=False, error_model="numpy")
 def _gradient_histogram(planes, cell, n_bins, table, hist):
     """gradMag (full orientation) + gradHist(softBin=-1): bilinear in space, hard in angle.
 
@@ -231,7 +231,7 @@ def _gradient_histogram(planes, cell, n_bins, table, hist):
             hist[hb - 1, x, o] *= _BORDER_GAIN
 
 
-@njit(cache=True, fastmath=False, error_model="numpy")
+@njit(cache=True, nogil=True, fastmath=False, error_model="numpy")
 def _block_normalisers(insensitive, cell):
     """hogNormMatrix: 1/sqrt(2x2 block energy + eps) on an (hb+1, wb+1) grid, border copied.
 
@@ -271,7 +271,7 @@ def _block_normalisers(insensitive, cell):
     return norm
 
 
-@njit(cache=True, fastmath=False, error_model="numpy")
+@njit(cache=True, nogil=True, fastmath=False, error_model="numpy")
 def _fhog_into(image, cell, n_orients, clip, table, out):
     """fhog of one (H, W, C) image into `out` (H//cell, W//cell, 3n+5), which must be zeroed."""
     hb, wb = out.shape[0], out.shape[1]
@@ -314,7 +314,7 @@ def _fhog_into(image, cell, n_orients, clip, table, out):
                 out[y, x, n_bins + o] = t0 * _HALF + t1 * _HALF + t2 * _HALF + t3 * _HALF
 
 
-@njit(cache=True, fastmath=False, error_model="numpy")
+@njit(cache=True, nogil=True, fastmath=False, error_model="numpy")
 def _fhog_batch_into(images, cell, n_orients, clip, table, out):
     for i in range(images.shape[0]):
         _fhog_into(images[i], cell, n_orients, clip, table, out[i])

@@ -23,7 +23,9 @@ def resize_auto(patch: np.ndarray, size_hw: tuple[int, int]) -> np.ndarray:
     return cv2.resize(patch, (cols, rows), interpolation=interpolation)
 
 
-def crop_replicate(image: np.ndarray, position: tuple[float, float], size_hw: tuple[int, int]) -> np.ndarray:
+def crop_replicate(
+    image: np.ndarray, position: tuple[float, float], size_hw: tuple[int, int]
+) -> np.ndarray:
     """Patch of `size_hw` centred on the 1-based `position`, pixels outside copied from the border.
 
     Equivalent to the release's index clamping `xs = floor(pos) + (1:sz) - floor(sz/2)`.
@@ -35,6 +37,19 @@ def crop_replicate(image: np.ndarray, position: tuple[float, float], size_hw: tu
     bottom, right = top + rows, left + cols
     if top >= 0 and left >= 0 and bottom <= height and right <= width:
         return image[top:bottom, left:right]
+    if top < height and bottom > 0 and left < width and right > 0:
+        inside = np.ascontiguousarray(
+            image[max(top, 0) : min(bottom, height), max(left, 0) : min(right, width)]
+        )
+        return cv2.copyMakeBorder(
+            inside,
+            max(-top, 0),
+            max(bottom - height, 0),
+            max(-left, 0),
+            max(right - width, 0),
+            cv2.BORDER_REPLICATE,
+        )
+    # Entirely outside the image (a target that left the frame): every pixel is a border one.
     row_index = np.clip(np.arange(top, bottom), 0, height - 1)
     col_index = np.clip(np.arange(left, right), 0, width - 1)
     return image[row_index[:, None], col_index[None, :]]

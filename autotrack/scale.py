@@ -39,10 +39,7 @@ class ScaleFilter:
         offsets = np.arange(1, n + 1) - centre
         sigma = math.sqrt(n) * params.scale_sigma_factor
         self.label_f = scipy.fft.fft(np.exp(-0.5 * offsets**2 / sigma**2)).astype(np.complex64)
-        if n % 2 == 0:
-            window = symmetric_hann(n + 1)[1:]
-        else:
-            window = symmetric_hann(n)
+        window = symmetric_hann(n + 1)[1:] if n % 2 == 0 else symmetric_hann(n)
         self.window = window.astype(np.float32)
         target_area = float(np.prod(initial_target_size_hw))
         model_factor = 1.0
@@ -62,9 +59,14 @@ class ScaleFilter:
         self._denominator: np.ndarray | None = None
         self._samples: np.ndarray | None = None
 
-    def _extract(self, image: np.ndarray, position, scale: float, indices: np.ndarray) -> np.ndarray:
+    def _extract(
+        self, image: np.ndarray, position, scale: float, indices: np.ndarray
+    ) -> np.ndarray:
         patches = scale_patches(
-            image, position, self.base_target_size_hw, scale * self.scale_steps[indices],
+            image,
+            position,
+            self.base_target_size_hw,
+            scale * self.scale_steps[indices],
             self.model_size_hw,
         )
         return scale_features(patches) * self.window[indices, None]

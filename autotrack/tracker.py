@@ -119,7 +119,10 @@ class AutoTrack:
         region_size = np.floor(self.base_target_size / cell).astype(int)
         self.region_size = (max(int(region_size[0]), 1), max(int(region_size[1]), 1))
 
-        sigma = math.sqrt(float(np.prod(np.floor(self.base_target_size / cell)))) * p.output_sigma_factor
+        sigma = (
+            math.sqrt(float(np.prod(np.floor(self.base_target_size / cell))))
+            * p.output_sigma_factor
+        )
         self.label_f = dcf.to_spectrum(dcf.gaussian_label(self.grid_size, sigma).astype(np.float32))
         self.cos_window = dcf.cosine_window(self.grid_size)
         self.base_window = regularization.base_spatial_window(
@@ -201,9 +204,7 @@ class AutoTrack:
         self.previous_displacement = (disp_row, disp_col)
 
         # Translation in pixels and the scale search at the new position.
-        translation = dcf.matlab_round(
-            np.array([disp_row, disp_col]) * p.cell_size * self.scale
-        )
+        translation = dcf.matlab_round(np.array([disp_row, disp_col]) * p.cell_size * self.scale)
         self.position = self.position + translation
         best_scale, self.scale = self.scale_filter.detect(image, self.position, self.scale)
 
@@ -237,7 +238,9 @@ class AutoTrack:
     def _features_spectrum(self, image: np.ndarray) -> np.ndarray:
         region = dcf.matlab_round(self.window_size * self.scale).astype(int)
         patch = search_patch(
-            image, self.position, (region[0], region[1]),
+            image,
+            self.position,
+            (region[0], region[1]),
             (int(self.window_size[0]), int(self.window_size[1])),
         )
         features = extract_features(patch, self.params, self.colour_table)
@@ -276,12 +279,20 @@ class AutoTrack:
 
         return paper
 
-    def _train(self, xf: np.ndarray, theta_start: float, theta_ref: float) -> tuple[np.ndarray, float]:
+    def _train(
+        self, xf: np.ndarray, theta_start: float, theta_ref: float
+    ) -> tuple[np.ndarray, float]:
         """Filter for this frame by ADMM (eqs. 8-15), warm-started from the previous one."""
         update = self._theta_update(theta_ref, self.filter_f)
         return dcf.train_filter(
-            xf, self.label_f, self.filter_f, self.spatial_window, theta_start, self.admm,
-            self.transform, update,
+            xf,
+            self.label_f,
+            self.filter_f,
+            self.spatial_window,
+            theta_start,
+            self.admm,
+            self.transform,
+            update,
         )
 
     def _target_size(self) -> np.ndarray:

@@ -74,7 +74,9 @@ def main() -> None:
     ours_all, octave_all, ours_uav, official_uav = [], [], [], []
     for dataset, name, boxes, fps in outputs:
         gt = read_boxes(SHARED / "sequences" / dataset / name / "groundtruth_rect.txt")
-        octave = read_boxes(SHARED / "reference" / "autotrack_release_octave" / dataset / f"{name}.txt")
+        octave = read_boxes(
+            SHARED / "reference" / "autotrack_release_octave" / dataset / f"{name}.txt"
+        )
         ours = scores(boxes, gt)
         oct_scores = scores(octave, gt)
         median_iou = float(np.median(overlaps(boxes, octave)))
@@ -82,7 +84,9 @@ def main() -> None:
         octave_all.append(oct_scores)
         official_text = ""
         if dataset in UAV_DATASETS:
-            official = read_boxes(SHARED / "reference" / "autotrack_official" / dataset / f"{name}.txt")
+            official = read_boxes(
+                SHARED / "reference" / "autotrack_official" / dataset / f"{name}.txt"
+            )
             off_scores = scores(official, gt)
             ours_uav.append(ours)
             official_uav.append(off_scores)
@@ -97,10 +101,14 @@ def main() -> None:
             write_boxes(out / f"{name}.txt", boxes)
     mean = lambda rows: np.mean(np.array(rows), axis=0)  # noqa: E731
     m_ours, m_oct = mean(ours_all), mean(octave_all)
-    print(f"mean of {len(ours_all)}: ours {m_ours[0]:.3f}/{m_ours[1]:.3f}  octave {m_oct[0]:.3f}/{m_oct[1]:.3f}")
+    print(
+        f"mean of {len(ours_all)}: ours {m_ours[0]:.3f}/{m_ours[1]:.3f}  octave {m_oct[0]:.3f}/{m_oct[1]:.3f}"
+    )
     if ours_uav:
         m_u, m_off = mean(ours_uav), mean(official_uav)
-        print(f"mean of {len(ours_uav)} UAV: ours {m_u[0]:.3f}/{m_u[1]:.3f}  official {m_off[0]:.3f}/{m_off[1]:.3f}")
+        print(
+            f"mean of {len(ours_uav)} UAV: ours {m_u[0]:.3f}/{m_u[1]:.3f}  official {m_off[0]:.3f}/{m_off[1]:.3f}"
+        )
 
 
 if __name__ == "__main__":

@@ -246,6 +246,26 @@ def test_colour_map_spans_the_jet_range() -> None:
     assert image[-1, -1, 0] > image[-1, -1, 2]  # hot end is red (RGB)
 
 
+def test_chart_range_skips_nan_and_only_grows() -> None:
+    from app.plots import y_range
+
+    low, high = y_range([np.array([np.nan, 0.2, 0.5]), np.array([np.nan, np.nan])], None)
+    assert low <= 0.2 and high >= 0.5 and high - low < 1.0
+    assert y_range([np.array([0.3])], (low, high)) == (low, high)  # inside: unchanged
+    grown = y_range([np.array([2.0])], (low, high))
+    assert grown[0] <= low and grown[1] >= 2.0
+    assert y_range([np.array([np.nan])], None) == (-0.1, 1.1)  # nothing finite yet
+
+
+def test_trajectory_has_a_gap_where_poses_are_missing() -> None:
+    from app.view3d import segments_with_gaps
+
+    positions = np.arange(15, dtype=float).reshape(5, 3)
+    segments = segments_with_gaps([0, 1, 2, 4, 5], positions)
+    assert segments.shape == (3, 2, 3)
+    np.testing.assert_array_equal(segments[2], [positions[3], positions[4]])  # frames 4-5
+
+
 # -- a tab driven through its callbacks ---------------------------------------------------------
 
 DEMO = REPO / "static" / "demo"
@@ -482,6 +502,29 @@ def test_correcting_a_box_retracks_that_target_from_there(studio) -> None:
     events = recorded.events
     corrections = [e for e in events if e.kind == "box_corrected"]
     assert [(e.target_id, e.frame_index) for e in corrections] == [("T2", 5)]
+
+
+def test_invalid_poses_are_drawn_as_invalid(studio) -> None:
+    tab, _ = _open_tab(studio)
+    _draw_demo_boxes(tab)
+    tab.frame_slider.value = 4
+    assert tab.wait_idle()
+    _wait_for(lambda: tab.view3d.frustum_state == "valid" and tab.view3d.segments_sent == 3)
+
+    for target_id in ("T1", "T2"):  # two landmarks left: no pose can be trusted
+        tab.draw_dropdown.value = target_id
+        assert tab.wait_idle()
+        tab.landmark_dropdown.value = "none"
+        assert tab.wait_idle()
+    tab.draw_dropdown.value = "new target"
+    _click(tab.step_button)
+    _click(tab.step_button)
+    assert tab.wait_idle()
+
+    run = tab.run
+    assert not run.poses[5].valid and run.poses[5].reason
+    _wait_for(lambda: tab.view3d.frustum_state == "invalid")
+    assert "pose invalid" in tab.status.content
 
 
 def test_typed_box_landmark_and_delete(studio) -> None:

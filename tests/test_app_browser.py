@@ -34,6 +34,8 @@ CHROMIUM_FLAGS = [
 ]
 VIEWPORT = {"width": 1600, "height": 1000}
 PLAY_FRAMES = 30
+CHARTS_JS = """() => Object.values(window.__viserTestpoints?.uplots ?? {}).map((entry) => ({
+    frames: entry.chart.data[0].length, x_max: entry.chart.scales.x.max}))"""
 
 
 def _wait_for(predicate, timeout: float = 60.0, what: str = "condition", tab=None) -> None:
@@ -160,8 +162,18 @@ def test_draw_play_inspect_and_download_in_chromium(studio, tmp_path: Path) -> N
             _wait_for(lambda: tab.view3d.segments_sent > 0, what="the trajectory", tab=tab)
             assert tab.stats.overlay_maps > 0 and tab.stats.canvas_frames > 0
             assert sum(pose.valid for pose in run.poses.values()) > PLAY_FRAMES // 2
-            _wait_for(lambda: page.locator(".uplot").count() >= 4, what="four charts", tab=tab)
+            # The four charts were drawn in the page with every tracked frame (viser's uPlot
+            # component registers each chart under window.__viserTestpoints).
+            _wait_for(
+                lambda: sorted(row["frames"] for row in page.evaluate(CHARTS_JS)) == [last + 1] * 4,
+                what="four charts with every frame",
+                tab=tab,
+            )
+            assert all(row["x_max"] == run.frame_count - 1 for row in page.evaluate(CHARTS_JS))
             page.screenshot(path=str(ARTIFACTS / "app-after-30-frames.png"))
+            page.get_by_text("Tracking speed (frames/s)").scroll_into_view_if_needed()
+            time.sleep(0.5)
+            page.screenshot(path=str(ARTIFACTS / "app-plots.png"))
 
             page.get_by_label("Canvas", exact=True).click()
             page.get_by_role("option", name=CANVAS_3D).click()

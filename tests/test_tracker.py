@@ -75,7 +75,9 @@ def test_full_occlusion_is_aberrant_and_leaves_the_filter_unchanged():
 
 
 def test_strcf_never_stops_learning_and_keeps_theta_fixed(moving_sequence):
-    results = _run(AutoTrack(preset("strcf")), moving_sequence.frames[:20], moving_sequence.boxes[0])
+    results = _run(
+        AutoTrack(preset("strcf")), moving_sequence.frames[:20], moving_sequence.boxes[0]
+    )
     assert not any(r.aberrant for r in results)
     assert all(r.theta == 15.0 for r in results[1:])
 
@@ -113,7 +115,14 @@ def test_target_leaving_the_frame_does_not_crash():
 
 @pytest.mark.parametrize(
     "box",
-    [(10, 10, 0, 20), (10, 10, 20, -3), (500, 10, 20, 20), (-50, -50, 20, 20), (1, 2, 3), ("a", 1, 2, 3)],
+    [
+        (10, 10, 0, 20),
+        (10, 10, 20, -3),
+        (500, 10, 20, 20),
+        (-50, -50, 20, 20),
+        (1, 2, 3),
+        ("a", 1, 2, 3),
+    ],
 )
 def test_bad_initial_boxes_are_rejected_with_a_clear_error(box):
     frame = np.zeros((100, 120, 3), dtype=np.uint8)
@@ -148,7 +157,11 @@ def test_opencv_call_shape_adapter_takes_bgr(moving_sequence):
 @needs_shared
 @pytest.mark.parametrize(
     ("dataset", "name", "release_precision"),
-    [("DTB70", "MountainBike6", 1.0), ("OTB", "Crossing", 1.0), ("UAV123_10fps", "wakeboard7", 1.0)],
+    [
+        ("DTB70", "MountainBike6", 1.0),
+        ("OTB", "Crossing", 1.0),
+        ("UAV123_10fps", "wakeboard7", 1.0),
+    ],
 )
 def test_real_sequence_precision_reaches_the_release(dataset, name, release_precision):
     sequence = load_otb_sequence(SHARED / "sequences" / dataset / name)[0]
@@ -158,5 +171,7 @@ def test_real_sequence_precision_reaches_the_release(dataset, name, release_prec
     precision = precision_at(center_errors(boxes, sequence.ground_truth), 20.0)
     assert precision >= release_precision - 0.02
     # Frame by frame close to the release's own boxes (run under Octave).
-    release = read_boxes(SHARED / "reference" / "autotrack_release_octave" / dataset / f"{name}.txt")
+    release = read_boxes(
+        SHARED / "reference" / "autotrack_release_octave" / dataset / f"{name}.txt"
+    )
     assert np.median(overlaps(boxes, release)) > 0.85

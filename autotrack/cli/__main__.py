@@ -1,4 +1,5 @@
 import sys
+
 from autotrack.cli import main
 
 sys.exit(main())
