@@ -19,6 +19,7 @@ from collections import OrderedDict
 from collections.abc import Callable, Iterator, Mapping
 from dataclasses import dataclass, field, replace
 from pathlib import Path
+from types import EllipsisType
 from typing import Any
 
 import numpy as np
@@ -190,7 +191,7 @@ class TrackingRun:
         return [landmark for landmark in self.scene.landmark_ids if landmark not in taken]
 
     def add_target(
-        self, frame_index: int, box: Box, landmark_id: str | None | type[Ellipsis] = ...
+        self, frame_index: int, box: Box, landmark_id: str | None | EllipsisType = ...
     ) -> str:
         """A new target with its box on frame `frame_index`; returns its id.
 

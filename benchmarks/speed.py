@@ -92,7 +92,9 @@ def guard(boxes_by_sequence: dict[str, np.ndarray]) -> bool:
     from autotrack.datasets import read_boxes
     from autotrack.evaluation import score_sequence
 
-    print(f"\nregression guard (AutoTrack + published table vs {REFERENCE.name}/, {TOLERANCE_PX} px)")
+    print(
+        f"\nregression guard (AutoTrack + published table vs {REFERENCE.name}/, {TOLERANCE_PX} px)"
+    )
     ok = True
     ours, kept = [], []
     for name, boxes in sorted(boxes_by_sequence.items()):
@@ -102,7 +104,9 @@ def guard(boxes_by_sequence: dict[str, np.ndarray]) -> bool:
             ok = False
             continue
         reference = read_boxes(reference_path)
-        truth = read_boxes(SHARED / "sequences" / reference_path.parent.name / name / "groundtruth_rect.txt")
+        truth = read_boxes(
+            SHARED / "sequences" / reference_path.parent.name / name / "groundtruth_rect.txt"
+        )
         deviation = np.max(np.abs(boxes - reference), axis=1)
         bad = np.flatnonzero(deviation > TOLERANCE_PX)
         if bad.size == 0:
@@ -110,7 +114,10 @@ def guard(boxes_by_sequence: dict[str, np.ndarray]) -> bool:
         else:
             status = f"first differs at frame {bad[0]} ({bad.size} frames > {TOLERANCE_PX} px)"
             ok &= bool(bad[0] >= 5)
-        score, kept_score = score_sequence(name, boxes, truth), score_sequence(name, reference, truth)
+        score, kept_score = (
+            score_sequence(name, boxes, truth),
+            score_sequence(name, reference, truth),
+        )
         ours.append((score.precision, score.auc))
         kept.append((kept_score.precision, kept_score.auc))
         print(
