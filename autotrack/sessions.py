@@ -888,6 +888,17 @@ class Session:
         return int(has_box.sum())
 
     @property
+    def deleted_targets(self) -> frozenset[str]:
+        """Targets whose last box edit deleted them (and that were not drawn again)."""
+        deleted = {e.target_id for e in self.events if e.kind == "box_deleted" and e.target_id}
+        return frozenset(t for t in deleted if t not in self.last_boxes)
+
+    @property
+    def exported_targets(self) -> tuple[str, ...]:
+        """Targets that exports write: every recorded target except deleted ones."""
+        return tuple(t for t in self.targets if t not in self.deleted_targets)
+
+    @property
     def duration_s(self) -> float:
         """Video time covered by the recorded frames (seconds at the session's fps)."""
         return len(self.frame_indices) / self.fps
@@ -1307,7 +1318,8 @@ def write_otb_tracks(
     session: Session, directory: str | Path, *, overwrite: bool = False
 ) -> list[Path]:
     """One `<target>.txt` per target in the benchmark format (autotrack.datasets.write_boxes):
-    a line `x,y,w,h` per frame 0..last, 1-BASED x and y, `NaN` where the target has no box."""
+    a line `x,y,w,h` per frame 0..last, 1-BASED x and y, `NaN` where the target has no box.
+    Targets the user deleted are not written."""
     from autotrack.datasets import write_boxes
 
     directory = Path(directory)
@@ -1315,14 +1327,15 @@ def write_otb_tracks(
         directory.mkdir(parents=True, exist_ok=True)
     except OSError as error:
         raise SessionError(f"cannot create {directory}: {error}") from error
-    paths = [directory / f"{target_id}.txt" for target_id in session.targets]
+    targets = session.exported_targets
+    paths = [directory / f"{target_id}.txt" for target_id in targets]
     taken = [str(path) for path in paths if path.exists()]
     if taken and not overwrite:
         raise SessionError(
             f"{', '.join(taken)} already exist(s); not replaced (--force / overwrite=True "
             "replaces them)"
         )
-    for target_id, path in zip(session.targets, paths, strict=True):
+    for target_id, path in zip(targets, paths, strict=True):
         try:
             write_boxes(path, session.tracks[target_id])
         except OSError as error:
@@ -1335,7 +1348,7 @@ def write_tracks_csv(session: Session, path: str | Path, *, overwrite: bool = Fa
     one row per frame and target with a box, ordered by frame then target."""
     lines = ["frame,target,x,y,w,h,score,aberrant"]
     for frame_index in session.frame_indices:
-        for target_id in session.targets:
+        for target_id in session.exported_targets:
             box = session.tracks[target_id][frame_index]
             if not np.isfinite(box).all():
                 continue

@@ -739,7 +739,10 @@ def test_cli_export_round_trips_tracks_csv_and_tum(
     )
     assert code == 0
     session = open_session(recorded.path)
-    for target_id in session.targets:
+    # t3 was deleted by the user at frame 30: exports leave it out.
+    assert session.deleted_targets == {"t3"}
+    assert not (out / "tracks" / "t3.txt").exists()
+    for target_id in session.exported_targets:
         lines = (out / "tracks" / f"{target_id}.txt").read_text().splitlines()
         first_box = recorded.results[target_id][0].box
         first_frame = recorded.results[target_id][0].frame_index
@@ -751,7 +754,9 @@ def test_cli_export_round_trips_tracks_csv_and_tum(
         np.testing.assert_allclose(boxes, session.tracks[target_id], atol=1e-4)
     rows = (out / "all.csv").read_text().splitlines()
     assert rows[0] == "frame,target,x,y,w,h,score,aberrant"
-    assert len(rows) - 1 == sum(len(series) for series in recorded.results.values())
+    kept = [series for target, series in recorded.results.items() if target != "t3"]
+    assert len(rows) - 1 == sum(len(series) for series in kept)
+    assert not any(row.split(",")[1] == "t3" for row in rows[1:])
     frame, target, *numbers = rows[1 + 2 * 7 + 1].split(",")  # frame 7, t2
     assert (frame, target) == ("7", "t2")
     result = recorded.results["t2"][7]
