@@ -96,14 +96,22 @@ def build_tables(sequences, summaries, reference: list[SequenceScore] | None, co
     return "\n".join(lines)
 
 
-def update_doc(tables: str) -> None:
+def update_doc(tables: str, colour_table: bool) -> None:
+    """Rewrite this colour feature's results section of docs/benchmarks.md (or append it)."""
+    key = "table" if colour_table else "default"
+    start, end = (
+        START.replace("results", f"results:{key}"),
+        END.replace("results", f"results:{key}"),
+    )
+    title = "published Color Names table" if colour_table else "default colour feature (lab11)"
     text = DOC.read_text()
-    section = f"{START}\n{tables}\n{END}"
-    if START in text and END in text:
-        head, rest = text.split(START, 1)
-        text = head + section + rest.split(END, 1)[1]
+    section = f"{start}\n{tables}\n{end}"
+    if start in text and end in text:
+        head, rest = text.split(start, 1)
+        text = head + section + rest.split(end, 1)[1]
     else:
-        text = text.rstrip("\n") + "\n\n## Results on ../shared/data/sequences\n\n" + section + "\n"
+        heading = f"## Results on ../shared/data/sequences: {title}"
+        text = text.rstrip("\n") + f"\n\n{heading}\n\n" + section + "\n"
     DOC.write_text(text)
 
 
@@ -134,7 +142,7 @@ def main() -> None:
     tables = build_tables(sequences, summaries, _reference_scores(sequences), command)
     print(tables)
     if args.update_doc:
-        update_doc(tables)
+        update_doc(tables, args.color_names is not None)
         print(f"updated {DOC}")
 
 

@@ -4,20 +4,24 @@
 from __future__ import annotations
 
 import argparse
+import contextlib
 import csv
 import json
 import math
 import sys
 from collections.abc import Sequence
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from tqdm import tqdm
 
 from autotrack.errors import BoxError, InputError
-from autotrack.params import PRESETS, preset
+from autotrack.params import PRESETS, TrackerParams, preset
 from autotrack.scene import Scene, load_scene, scene_warnings
+
+if TYPE_CHECKING:
+    from autotrack.sessions import SessionRecorder
 
 DEFAULT_FPS = 10.0
 LARGE_ERROR_CM = 20.0
@@ -84,6 +88,14 @@ def _add_localize(subparsers: argparse._SubParsersAction) -> None:
         metavar="PX",
         help="largest RMS reprojection error of a trusted pose (pixels, default 3)",
     )
+    parser.add_argument(
+        "--session",
+        type=Path,
+        default=None,
+        metavar="FILE",
+        help="record the run to this new MCAP session file (never overwritten; see "
+        "`autotrack session`)",
+    )
     parser.add_argument("--quiet", action="store_true", help="no progress bar")
     parser.set_defaults(func=run_localize)
 
@@ -131,7 +143,8 @@ def run_localize(args: argparse.Namespace) -> int:
     from autotrack.frames import open_frames
     from autotrack.localize import LocalizerParams, localize_sequence
 
-    scene = load_scene(_default_file(args.scene, args.sequence, "scene.json", "--scene"))
+    scene_path = _default_file(args.scene, args.sequence, "scene.json", "--scene")
+    scene = load_scene(scene_path)
     for warning in scene_warnings(scene):
         print(f"autotrack: warning: {warning}", file=sys.stderr)
     init = read_init_boxes(_default_file(args.init, args.sequence, "boxes.json", "--init"))
@@ -152,24 +165,62 @@ def run_localize(args: argparse.Namespace) -> int:
     if fps <= 0:
         raise InputError("--fps must be positive")
     records = []
+    tracker_params = preset(args.preset)
+    recorder = _open_recorder(args.session, args.sequence, tracker_params, scene_path, fps)
     progress = tqdm(total=len(frames), unit="frame", desc=frames.name, disable=args.quiet)
-    with frames, progress:
+    with frames, progress, recorder or contextlib.nullcontext():
         pipeline = localize_sequence(
             frames,
             scene,
             init,
-            preset(args.preset),
+            tracker_params,
             localizer_params,
             assignment_known=isinstance(init, dict),
             threads=args.threads,
         )
         for record in pipeline:
             records.append(record)
+            if recorder is not None:
+                _record_frame(recorder, record, scene)
             progress.update()
     timestamps = np.arange(len(records)) / fps
     report = summarise(records, timestamps, scene, args.out, args.tracks, gt, frames.name)
     print(report)
+    if args.session is not None:
+        print(f"session recorded to {args.session}")
     return 0
+
+
+def _open_recorder(
+    session: Path | None,
+    sequence: Path,
+    tracker_params: TrackerParams,
+    scene_path: Path,
+    fps: float,
+) -> SessionRecorder | None:
+    """A SessionRecorder writing `session` (a new file), or None without --session."""
+    if session is None:
+        return None
+    from autotrack.sessions import SessionRecorder
+
+    return SessionRecorder(
+        session,
+        source=str(sequence),
+        tracker_params=tracker_params,
+        scene_path=scene_path,
+        fps=fps,
+    )
+
+
+def _record_frame(recorder: SessionRecorder, record: Any, scene: Scene) -> None:
+    """One frame of the pipeline into the session: landmarks and first boxes, tracks, pose."""
+    if record.frame_index == 0:
+        recorder.log_landmarks(scene)
+        for landmark_id, track in record.tracks.items():
+            recorder.log_event("box_drawn", 0, landmark_id, track.box)
+    for landmark_id, track in record.tracks.items():
+        recorder.log_target(landmark_id, track, landmark_id=landmark_id)
+    recorder.log_pose(record.pose)
 
 
 def summarise(
