@@ -29,7 +29,7 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from autotrack.errors import InputError
-from autotrack.localize import write_tum
+from autotrack.localize import project_points, write_tum
 from autotrack.scene import CameraIntrinsics, Landmark, Scene, save_scene
 
 TRAJECTORIES = (
@@ -316,13 +316,8 @@ def landmark_box(
     outline = np.concatenate(
         [corners[k] + steps * (corners[(k + 1) % 4] - corners[k]) for k in range(4)]
     )
-    rotation_cw = rotation.T
-    rvec, _ = cv2.Rodrigues(rotation_cw)
-    tvec = -rotation_cw @ position
-    projected, _ = cv2.projectPoints(
-        outline.reshape(-1, 1, 3), rvec, tvec, camera.matrix(), camera.distortion_array()
-    )
-    u, v = projected[:, 0, 0], projected[:, 0, 1]
+    projected = project_points(camera, outline, rotation, position)
+    u, v = projected[:, 0], projected[:, 1]
     x0, y0 = float(u.min()), float(v.min())
     return (x0, y0, float(u.max()) - x0, float(v.max()) - y0)
 
@@ -373,16 +368,8 @@ def _projected_bounds(
     camera: CameraIntrinsics, points: np.ndarray, rotation: np.ndarray, position: np.ndarray
 ) -> tuple[float, float, float, float]:
     """(u0, v0, u1, v1) bounds of the projected points (corners only: fine for occlusion tests)."""
-    rotation_cw = rotation.T
-    rvec, _ = cv2.Rodrigues(rotation_cw)
-    projected, _ = cv2.projectPoints(
-        points.reshape(-1, 1, 3),
-        rvec,
-        -rotation_cw @ position,
-        camera.matrix(),
-        camera.distortion_array(),
-    )
-    u, v = projected[:, 0, 0], projected[:, 0, 1]
+    projected = project_points(camera, points, rotation, position)
+    u, v = projected[:, 0], projected[:, 1]
     return float(u.min()), float(v.min()), float(u.max()), float(v.max())
 
 
@@ -1001,16 +988,7 @@ def _blur_vector(
     tracks = []
     for moment in (t, t + exposure_s):
         rotation, position = trajectory(moment)
-        rotation_cw = rotation.T
-        rvec, _ = cv2.Rodrigues(rotation_cw)
-        projected, _ = cv2.projectPoints(
-            points.reshape(-1, 1, 3),
-            rvec,
-            -rotation_cw @ position,
-            camera.matrix(),
-            camera.distortion_array(),
-        )
-        tracks.append(projected.reshape(-1, 2))
+        tracks.append(project_points(camera, points, rotation, position))
     motion = np.median(tracks[1] - tracks[0], axis=0)
     return (float(motion[0]), float(motion[1]))
 
