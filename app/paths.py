@@ -60,7 +60,8 @@ def resolve_user_path(text: str, roots: Sequence[Path]) -> Path:
     """The existing file or folder a browser user typed, restricted to the allowed roots.
 
     Relative paths are taken relative to each root in turn. `~` is not expanded: the server's
-    home folder is none of the user's business.
+    home folder is none of the user's business. A path outside the roots gets the same message
+    whether or not it exists, so the browser cannot probe the server's file system.
     """
     cleaned = text.strip()
     if not cleaned:
@@ -76,8 +77,7 @@ def resolve_user_path(text: str, roots: Sequence[Path]) -> Path:
             continue
         if is_under(resolved, roots):
             return resolved
-        raise InputError(f"{cleaned} is outside the folders this server may open")
-    raise InputError(f"{cleaned} does not exist under the folders this server may open")
+    raise InputError(f"{cleaned}: no such file or folder among those this server may open")
 
 
 def looks_like_sequence(path: Path) -> bool:
