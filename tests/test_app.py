@@ -719,3 +719,20 @@ def test_startup_roots_cover_the_sequence_and_scene_folders(tmp_path: Path) -> N
     scene.write_text("{}")
     roots = startup_roots(sequence, scene, [tmp_path / "data"])
     assert roots == [(tmp_path / "data").resolve(), sequence.resolve(), scene.parent.resolve()]
+
+
+def test_installs_without_the_repo_render_the_same_demo_into_the_cache(tmp_path, monkeypatch):
+    from autotrack.cli.app import rendered_demo
+
+    monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path))
+    demo = rendered_demo()
+    assert demo == tmp_path / "autotrack-studio" / "demo"
+    embedded = Path(__file__).resolve().parents[1] / "static" / "demo"
+    for name in ("scene.json", "boxes.json", "poses_gt.tum"):
+        assert (demo / name).read_text() == (embedded / name).read_text()
+    frames = sorted((demo / "img").iterdir())
+    assert [f.name for f in frames] == sorted(f.name for f in (embedded / "img").iterdir())
+    assert frames[0].read_bytes() == (embedded / "img" / frames[0].name).read_bytes()
+    # Rendered once: a second launch reuses it.
+    stamp = (demo / "scene.json").stat().st_mtime_ns
+    assert rendered_demo() == demo and (demo / "scene.json").stat().st_mtime_ns == stamp

@@ -3,8 +3,11 @@
 from __future__ import annotations
 
 import argparse
+import os
+import shutil
 import signal
 import threading
+from dataclasses import replace
 from pathlib import Path
 
 from autotrack.errors import InputError
@@ -84,6 +87,32 @@ def startup_roots(sequence: Path | None, scene: Path | None, allow_roots: list[P
     return roots
 
 
+def rendered_demo() -> Path:
+    """The demo rendered into the user's cache folder (installs without the repo's static/).
+
+    The renderer is deterministic, so this is the same sequence as static/demo; it is rendered
+    once (a few seconds) and reused.
+    """
+    from autotrack.synthetic import generate_demo
+
+    cache = Path(os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache")
+    demo = cache / "autotrack-studio" / "demo"
+    if not (demo / "scene.json").is_file():
+        print(f"rendering the demo into {demo} (first launch only)...", flush=True)
+        partial = demo.with_name("demo.partial")
+        shutil.rmtree(partial, ignore_errors=True)
+        try:
+            generate_demo(partial)
+            shutil.rmtree(demo, ignore_errors=True)
+            partial.rename(demo)
+        except OSError as error:
+            raise InputError(
+                f"the embedded demo is missing and cannot be rendered into {demo}: {error}; "
+                "give a SEQUENCE to open"
+            ) from error
+    return demo
+
+
 def run(args: argparse.Namespace) -> int:
     if not 0 <= args.port <= 65535:
         raise InputError(f"--port must be 0..65535, got {args.port}")
@@ -104,9 +133,7 @@ def run(args: argparse.Namespace) -> int:
         canvas_fps=args.canvas_fps,
     )
     if config.sequence is None and not config.demo_dir.is_dir():
-        raise InputError(
-            f"the embedded demo is missing ({config.demo_dir}); give a SEQUENCE to open"
-        )
+        config = replace(config, demo_dir=rendered_demo())
     studio = StudioServer(config)
     print(f"AutoTrack Studio: {studio.url}", flush=True)
     if args.host not in LOOPBACK_HOSTS:
