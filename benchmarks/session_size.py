@@ -1,0 +1,66 @@
+"""Session file size per 1,000 frames: four tracked landmarks + a camera pose every frame.
+
+Records the embedded demo (60 frames, 960x540) through the localisation pipeline three times —
+without maps, with the response and local-variation maps (the default), and with embedded
+JPEG frames — and scales the file sizes to 1,000 frames.
+
+    python benchmarks/session_size.py
+"""
+
+from __future__ import annotations
+
+import json
+import tempfile
+from pathlib import Path
+
+from autotrack.frames import open_frames
+from autotrack.localize import localize_sequence
+from autotrack.params import preset
+from autotrack.scene import load_scene
+from autotrack.sessions import SessionRecorder
+
+DEMO = Path(__file__).resolve().parents[1] / "static" / "demo"
+
+
+def record(path: Path, **options: bool) -> int:
+    """Record the demo's localisation run to `path`; returns the frame count."""
+    scene = load_scene(DEMO / "scene.json")
+    boxes = json.loads((DEMO / "boxes.json").read_text())
+    frames = open_frames(DEMO)
+    images = [frames.read(i) for i in range(len(frames))]
+    params = preset("autotrack")
+    with SessionRecorder(
+        path,
+        source=str(DEMO),
+        tracker_params=params,
+        scene_path=DEMO / "scene.json",
+        fps=10.0,
+        **options,
+    ) as recorder:
+        recorder.log_landmarks(scene)
+        for record in localize_sequence(images, scene, boxes, params):
+            if options.get("embed_frames"):
+                recorder.log_frame(record.frame_index, images[record.frame_index])
+            for landmark_id, track in record.tracks.items():
+                recorder.log_target(landmark_id, track, landmark_id=landmark_id)
+            recorder.log_pose(record.pose)
+    return len(images)
+
+
+def main() -> None:
+    variants = {
+        "boxes, signals, poses (record_maps=False)": {"record_maps": False},
+        "+ response and local-variation maps (default)": {"record_maps": True},
+        "+ maps + embedded JPEG frames (960x540)": {"record_maps": True, "embed_frames": True},
+    }
+    print("size per 1,000 frames, 4 targets + pose per frame (embedded demo):")
+    with tempfile.TemporaryDirectory() as folder:
+        for index, (label, options) in enumerate(variants.items()):
+            path = Path(folder) / f"session{index}.mcap"
+            frames = record(path, **options)
+            per_thousand = path.stat().st_size * 1000 / frames / 1e6
+            print(f"  {label:<48} {per_thousand:8.2f} MB")
+
+
+if __name__ == "__main__":
+    main()
