@@ -92,6 +92,33 @@ class TrackerParams:
     scale_model_max_area: float = 32.0 * 16.0
     """Largest area (pixels^2) of a resampled scale sample."""
 
+    def __post_init__(self) -> None:
+        from autotrack.errors import InputError
+
+        problems = []
+        if self.cell_size < 1:
+            problems.append("cell_size must be at least 1")
+        if not self.search_area_scale > 0:
+            problems.append("search_area_scale must be positive")
+        if not 0 < self.min_image_sample_size <= self.max_image_sample_size:
+            problems.append("need 0 < min_image_sample_size <= max_image_sample_size")
+        if self.admm_iterations < 1 or self.newton_iterations < 0:
+            problems.append("admm_iterations must be >= 1 and newton_iterations >= 0")
+        if self.num_scales < 1 or not self.scale_step > 1:
+            problems.append("num_scales must be >= 1 and scale_step > 1")
+        if self.colour_feature not in ("lab11", "table", "none"):
+            problems.append(
+                f"colour_feature must be 'lab11', 'table' or 'none', not {self.colour_feature!r}"
+            )
+        if self.theta_update not in ("release", "paper", "reference"):
+            problems.append(
+                f"theta_update must be 'release', 'paper' or 'reference', not {self.theta_update!r}"
+            )
+        if not (self.use_grey or self.use_fhog or self.colour_feature != "none"):
+            problems.append("enable at least one feature")
+        if problems:
+            raise InputError("invalid tracker parameters: " + "; ".join(problems))
+
     @property
     def name(self) -> str:
         """Short label of the regularisation variant (for tables)."""

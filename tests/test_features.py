@@ -509,9 +509,8 @@ def test_extract_features_honours_the_parameters():
     np.testing.assert_array_equal(extract_features(patch, hog_only, None), fhog(patch)[:, :, :31])
     grey_only = dataclasses.replace(no_colour, use_fhog=False)
     assert feature_dim(grey_only, colour=True) == 1
-    nothing = dataclasses.replace(grey_only, use_grey=False)
-    with pytest.raises(InputError, match="no feature"):
-        extract_features(patch, nothing, None)
+    with pytest.raises(InputError, match="enable at least one feature"):
+        dataclasses.replace(grey_only, use_grey=False)
     with pytest.raises(InputError, match="H x W x 3"):
         extract_features(np.zeros((8, 8, 4), np.uint8), TrackerParams(), None)
 

@@ -175,3 +175,32 @@ def test_real_sequence_precision_reaches_the_release(dataset, name, release_prec
         SHARED / "reference" / "autotrack_release_octave" / dataset / f"{name}.txt"
     )
     assert np.median(overlaps(boxes, release)) > 0.85
+
+
+@pytest.mark.parametrize(
+    "change",
+    [
+        {"cell_size": 0},
+        {"admm_iterations": 0},
+        {"scale_step": 1.0},
+        {"colour_feature": "rainbow"},
+        {"theta_update": "guess"},
+        {"min_image_sample_size": 0.0},
+        {"use_grey": False, "use_fhog": False, "colour_feature": "none"},
+    ],
+)
+def test_invalid_parameters_are_refused_with_a_message(change):
+    with pytest.raises(InputError, match="invalid tracker parameters"):
+        TrackerParams(**change)
+
+
+@pytest.mark.parametrize("variant", ["release", "paper", "reference"])
+def test_every_theta_variant_tracks_and_keeps_theta_below_its_reference(variant, moving_sequence):
+    tracker = AutoTrack(TrackerParams(theta_update=variant))
+    results = _run(tracker, moving_sequence.frames[:20], moving_sequence.boxes[0])
+    trained = [r for r in results[2:] if not r.aberrant]
+    assert trained and all(0.0 <= r.theta <= r.theta_ref + 1e-9 for r in trained)
+    if variant == "reference":
+        assert all(r.theta == pytest.approx(r.theta_ref) for r in trained)
+    errors = center_errors(np.array([r.box for r in results]), moving_sequence.boxes[:20])
+    assert errors.max() < 6.0
