@@ -75,8 +75,9 @@ class TrackerParams:
     fixed_theta: float = 15.0
     """Temporal penalty when ATR is off (STRCF's value)."""
     theta_update: ThetaUpdate = "release"
-    """In-ADMM theta re-estimation (eq. 13): 'release' (last channel, spectral norm, skipped on the
-    last iteration), 'paper' (all channels, Frobenius), 'reference' (theta = theta_ref)."""
+    """In-ADMM theta re-estimation (eq. 13): 'release' (the release's own form: one element of
+    the filter difference, MATLAB linear index = channel count; ~1e-6 against zeta), 'paper' (all
+    channels, Frobenius norm), 'reference' (theta = theta_ref). Clamped at 0."""
 
     # Scale filter (DSST)
     num_scales: int = 33
