@@ -1347,8 +1347,9 @@ def write_tracks_csv(session: Session, path: str | Path, *, overwrite: bool = Fa
     """Combined CSV: frame (0-based), target, x, y, w, h (0-based pixels), score, aberrant (0/1);
     one row per frame and target with a box, ordered by frame then target."""
     lines = ["frame,target,x,y,w,h,score,aberrant"]
+    targets = session.exported_targets
     for frame_index in session.frame_indices:
-        for target_id in session.exported_targets:
+        for target_id in targets:
             box = session.tracks[target_id][frame_index]
             if not np.isfinite(box).all():
                 continue
