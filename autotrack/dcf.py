@@ -283,7 +283,7 @@ def newton_peak(response: np.ndarray, iterations: int) -> tuple[float, float, fl
         pos_y, pos_x, score = init_y, init_x, init_score
     disp_row = (np.mod(pos_y + np.pi, 2.0 * np.pi) - np.pi) / (2.0 * np.pi) * rows
     disp_col = (np.mod(pos_x + np.pi, 2.0 * np.pi) - np.pi) / (2.0 * np.pi) * cols
-    return float(disp_row), float(disp_col), max(score, init_score)
+    return float(disp_row), float(disp_col), score
 
 
 def shift_spectrum(
