@@ -15,9 +15,9 @@ from autotrack.result import TrackResult
 
 def __getattr__(name: str):
     # The tracker pulls in numba-compiled features: import it on first use only, so that
-    # `autotrack.frames`, `autotrack.evaluation` etc. stay light to import.
+    # `autotrack.io.frames`, `autotrack.evaluation.metrics` etc. stay light to import.
     if name in ("AutoTrack", "CvAutoTrack"):
-        from autotrack import tracker
+        from autotrack.tracker import tracker
 
         return getattr(tracker, name)
     raise AttributeError(f"module 'autotrack' has no attribute {name!r}")

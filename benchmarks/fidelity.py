@@ -18,9 +18,9 @@ from pathlib import Path
 import numpy as np
 
 from autotrack import AutoTrack, preset
-from autotrack.datasets import load_otb_sequence, read_boxes, write_boxes
-from autotrack.evaluation import auc, center_errors, overlaps, precision_at, success_curve
-from autotrack.frames import read_image
+from autotrack.evaluation.datasets import load_otb_sequence, read_boxes, write_boxes
+from autotrack.evaluation.metrics import auc, center_errors, overlaps, precision_at, success_curve
+from autotrack.io.frames import read_image
 
 SHARED = Path(__file__).resolve().parents[1] / ".." / "shared" / "data"
 UAV_DATASETS = {"UAV123_10fps", "DTB70", "UAVDT"}

@@ -24,8 +24,8 @@ from pathlib import Path
 
 import numpy as np
 
-from autotrack.frames import open_frames
-from autotrack.localize import (
+from autotrack.io.frames import open_frames
+from autotrack.localization.localizer import (
     Localizer,
     LocalizerParams,
     TrajectoryErrors,
@@ -36,9 +36,9 @@ from autotrack.localize import (
     trajectory_errors,
     write_tum,
 )
+from autotrack.localization.scene import load_scene
 from autotrack.params import PRESETS, preset
-from autotrack.scene import load_scene
-from autotrack.synthetic import (
+from autotrack.synthetic.renderer import (
     RenderSettings,
     SequenceSpec,
     read_ground_truth_boxes,

@@ -13,11 +13,11 @@ import json
 import tempfile
 from pathlib import Path
 
-from autotrack.frames import open_frames
-from autotrack.localize import localize_sequence
+from autotrack.io.frames import open_frames
+from autotrack.localization.localizer import localize_sequence
+from autotrack.localization.scene import load_scene
 from autotrack.params import preset
-from autotrack.scene import load_scene
-from autotrack.sessions import SessionRecorder
+from autotrack.sessions.recorder import SessionRecorder
 
 DEMO = Path(__file__).resolve().parents[1] / "static" / "demo"
 

@@ -10,8 +10,10 @@ import cv2
 import numpy as np
 import pytest
 
-from autotrack import benchmark
-from autotrack.benchmark import (
+from autotrack.cli import main
+from autotrack.errors import InputError
+from autotrack.evaluation import benchmark
+from autotrack.evaluation.benchmark import (
     TaskResult,
     format_table,
     load_result,
@@ -22,11 +24,9 @@ from autotrack.benchmark import (
     summarize_run,
     summary_json,
 )
-from autotrack.cli import main
-from autotrack.datasets import Sequence, load_sequences, read_boxes
-from autotrack.errors import InputError
-from autotrack.evaluation import score_sequence
-from autotrack.peers import TRACKER_NAMES, OpenCVPeer, make_tracker
+from autotrack.evaluation.datasets import Sequence, load_sequences, read_boxes
+from autotrack.evaluation.metrics import score_sequence
+from autotrack.evaluation.peers import TRACKER_NAMES, OpenCVPeer, make_tracker
 
 REPO = Path(__file__).resolve().parents[1]
 SHARED = REPO / ".." / "shared" / "data"
@@ -239,7 +239,7 @@ def test_cli_bench_bad_input_is_one_line(synthetic_root, tmp_path, capsys):
 
 def _require_autotrack() -> None:
     try:
-        import autotrack.tracker  # noqa: F401
+        import autotrack.tracker.tracker  # noqa: F401
     except ImportError as error:
         pytest.skip(f"the AutoTrack tracker is not importable: {error}")
 

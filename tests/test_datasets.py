@@ -8,7 +8,8 @@ import cv2
 import numpy as np
 import pytest
 
-from autotrack.datasets import (
+from autotrack.errors import InputError
+from autotrack.evaluation.datasets import (
     Sequence,
     detect_layout,
     load_sequences,
@@ -16,7 +17,6 @@ from autotrack.datasets import (
     read_boxes,
     write_boxes,
 )
-from autotrack.errors import InputError
 
 SHARED = Path(__file__).resolve().parents[1] / ".." / "shared" / "data" / "sequences"
 

@@ -12,7 +12,8 @@ import pytest
 import scipy.io
 
 from autotrack.errors import InputError
-from autotrack.features import (
+from autotrack.params import TrackerParams
+from autotrack.tracker.features import (
     COLOUR_PROTOTYPES,
     COLOUR_TERMS,
     RGB2GRAY_WEIGHTS,
@@ -30,8 +31,7 @@ from autotrack.features import (
     scale_features,
     srgb_to_lab,
 )
-from autotrack.fhog import fhog, fhog_batch
-from autotrack.params import TrackerParams
+from autotrack.tracker.fhog import fhog, fhog_batch
 
 SHARED = Path(__file__).resolve().parents[1] / ".." / "shared"
 CN_TABLE = SHARED / "data" / "color_names" / "cn_norm_32768x10.npy"

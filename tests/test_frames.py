@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from autotrack.errors import InputError
-from autotrack.frames import ImageSequence, VideoFrames, open_frames
+from autotrack.io.frames import ImageSequence, VideoFrames, open_frames
 
 SHARED = Path(__file__).resolve().parents[1] / ".." / "shared" / "data" / "sequences"
 

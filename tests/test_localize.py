@@ -14,8 +14,8 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 from autotrack.cli import main
-from autotrack.frames import open_frames
-from autotrack.localize import (
+from autotrack.io.frames import open_frames
+from autotrack.localization.localizer import (
     Localizer,
     LocalizerParams,
     associate,
@@ -28,9 +28,9 @@ from autotrack.localize import (
     trajectory_errors,
     write_tum,
 )
+from autotrack.localization.scene import load_scene
 from autotrack.params import preset
-from autotrack.scene import load_scene
-from autotrack.synthetic import (
+from autotrack.synthetic.renderer import (
     TRAJECTORIES,
     RenderSettings,
     SequenceSpec,

@@ -7,8 +7,8 @@ from pathlib import Path
 import numpy as np
 
 from autotrack.cli import main
-from autotrack.datasets import read_boxes
-from autotrack.localize import read_tum
+from autotrack.evaluation.datasets import read_boxes
+from autotrack.localization.localizer import read_tum
 
 DEMO = Path(__file__).resolve().parents[1] / "static" / "demo"
 

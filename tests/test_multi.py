@@ -9,16 +9,16 @@ import numpy as np
 import pytest
 
 from autotrack.errors import InputError
-from autotrack.frames import open_frames
-from autotrack.multi import MultiTracker
+from autotrack.io.frames import open_frames
 from autotrack.params import preset
-from autotrack.synthetic import (
+from autotrack.synthetic.renderer import (
     RenderSettings,
     SequenceSpec,
     read_ground_truth_boxes,
     render_sequence,
 )
-from autotrack.tracker import AutoTrack
+from autotrack.tracker.multi import MultiTracker
+from autotrack.tracker.tracker import AutoTrack
 
 FRAMES = 12
 

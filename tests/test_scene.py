@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from autotrack.errors import SceneError
-from autotrack.scene import (
+from autotrack.localization.scene import (
     CameraIntrinsics,
     Landmark,
     Scene,

@@ -15,14 +15,14 @@ import pytest
 from mcap.reader import make_reader
 from mcap.writer import Writer
 
-from autotrack import sessions
 from autotrack.cli import main
-from autotrack.datasets import read_boxes
 from autotrack.errors import SessionError
+from autotrack.evaluation.datasets import read_boxes
+from autotrack.localization.scene import CameraIntrinsics, Landmark, Scene, save_scene
 from autotrack.params import TrackerParams, preset
 from autotrack.result import TrackResult
-from autotrack.scene import CameraIntrinsics, Landmark, Scene, save_scene
-from autotrack.sessions import (
+from autotrack.sessions import recorder as sessions
+from autotrack.sessions.recorder import (
     SessionRecorder,
     dequantise_map,
     last_state,
@@ -297,7 +297,7 @@ def test_quantise_map_keeps_the_range_and_handles_constant_maps() -> None:
 
 
 def test_real_tracker_run_round_trips(tmp_path: Path) -> None:
-    from autotrack.tracker import AutoTrack
+    from autotrack.tracker.tracker import AutoTrack
 
     frames, boxes = _generated_sequence(12)
     params = TrackerParams()
@@ -357,10 +357,10 @@ def test_localization_run_round_trips_through_export(
 ) -> None:
     """A real localisation run (synthetic test bed): recorded tracks and PoseEstimates come back
     out of `session export` as the pipeline's own boxes and TUM trajectory."""
-    from autotrack.frames import open_frames
-    from autotrack.localize import localize_sequence, read_tum, write_tum
-    from autotrack.scene import load_scene
-    from autotrack.synthetic import RenderSettings, SequenceSpec, render_sequence
+    from autotrack.io.frames import open_frames
+    from autotrack.localization.localizer import localize_sequence, read_tum, write_tum
+    from autotrack.localization.scene import load_scene
+    from autotrack.synthetic.renderer import RenderSettings, SequenceSpec, render_sequence
 
     spec = SequenceSpec("s", "circle", 8, 0, RenderSettings(width=640, height=360), period_s=45.0)
     folder = render_sequence(tmp_path / "synthetic", spec)

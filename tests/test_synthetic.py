@@ -9,9 +9,9 @@ import numpy as np
 import pytest
 
 from autotrack.cli import main
-from autotrack.localize import project_points, read_tum
-from autotrack.scene import load_scene, scene_warnings
-from autotrack.synthetic import (
+from autotrack.localization.localizer import project_points, read_tum
+from autotrack.localization.scene import load_scene, scene_warnings
+from autotrack.synthetic.renderer import (
     PAPER_FRAME_COUNTS,
     TRAJECTORIES,
     Renderer,

@@ -8,9 +8,9 @@ import numpy as np
 import pytest
 
 from autotrack import AutoTrack, BoxError, CvAutoTrack, InputError, TrackerParams, preset
-from autotrack.datasets import load_otb_sequence, read_boxes
-from autotrack.evaluation import center_errors, overlaps, precision_at
-from autotrack.frames import read_image
+from autotrack.evaluation.datasets import load_otb_sequence, read_boxes
+from autotrack.evaluation.metrics import center_errors, overlaps, precision_at
+from autotrack.io.frames import read_image
 from tests.sequences import moving_target_sequence
 
 SHARED = Path(__file__).resolve().parents[1] / ".." / "shared" / "data"

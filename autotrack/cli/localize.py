@@ -17,11 +17,11 @@ import numpy as np
 from tqdm import tqdm
 
 from autotrack.errors import BoxError, InputError
+from autotrack.localization.scene import Scene, load_scene, scene_warnings
 from autotrack.params import PRESETS, TrackerParams, preset
-from autotrack.scene import Scene, load_scene, scene_warnings
 
 if TYPE_CHECKING:
-    from autotrack.sessions import SessionRecorder
+    from autotrack.sessions.recorder import SessionRecorder
 
 DEFAULT_FPS = 10.0
 LARGE_ERROR_CM = 20.0
@@ -144,8 +144,8 @@ def _default_file(given: Path | None, sequence: Path, name: str, option: str) ->
 def run_localize(args: argparse.Namespace) -> int:
     from dataclasses import replace
 
-    from autotrack.frames import open_frames
-    from autotrack.localize import LocalizerParams, localize_sequence
+    from autotrack.io.frames import open_frames
+    from autotrack.localization.localizer import LocalizerParams, localize_sequence
 
     scene_path = _default_file(args.scene, args.sequence, "scene.json", "--scene")
     scene = load_scene(scene_path)
@@ -161,7 +161,7 @@ def run_localize(args: argparse.Namespace) -> int:
         localizer_params = replace(localizer_params, max_rms_error_px=args.max_rms)
     gt = None
     if args.gt is not None:
-        from autotrack.localize import read_tum
+        from autotrack.localization.localizer import read_tum
 
         gt = read_tum(args.gt)
     frames = open_frames(args.sequence)
@@ -205,7 +205,7 @@ def _open_recorder(
     """A SessionRecorder writing `session` (a new file), or None without --session."""
     if session is None:
         return None
-    from autotrack.sessions import SessionRecorder
+    from autotrack.sessions.recorder import SessionRecorder
 
     return SessionRecorder(
         session,
@@ -237,7 +237,7 @@ def summarise(
     name: str,
 ) -> str:
     """Write the requested files and return the text report (`name` labels the Table-3 row)."""
-    from autotrack.localize import format_table3, trajectory_errors, write_tum
+    from autotrack.localization.localizer import format_table3, trajectory_errors, write_tum
 
     positions = np.array([r.pose.position for r in records]).reshape(-1, 3)
     quaternions = np.array([r.pose.quaternion_xyzw() for r in records]).reshape(-1, 4)
@@ -341,7 +341,7 @@ def _add_synth(subparsers: argparse._SubParsersAction) -> None:
 
 
 def run_synth(args: argparse.Namespace) -> int:
-    from autotrack.synthetic import (
+    from autotrack.synthetic.renderer import (
         RenderSettings,
         generate_demo,
         generate_test_bed,

@@ -10,10 +10,10 @@ from pathlib import Path
 import numpy as np
 from tqdm import tqdm
 
-from autotrack.datasets import GROUND_TRUTH_FILE, read_boxes, write_boxes
 from autotrack.errors import BoxError, InputError
-from autotrack.evaluation import score_sequence
-from autotrack.frames import open_frames
+from autotrack.evaluation.datasets import GROUND_TRUTH_FILE, read_boxes, write_boxes
+from autotrack.evaluation.metrics import score_sequence
+from autotrack.io.frames import open_frames
 from autotrack.params import PRESETS, preset
 
 
@@ -66,7 +66,7 @@ def _ground_truth(sequence: Path) -> np.ndarray | None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from autotrack.tracker import AutoTrack
+    from autotrack.tracker.tracker import AutoTrack
 
     if args.colour_table is not None and not args.colour_table.is_file():
         raise InputError(f"Color Names table not found: {args.colour_table}")

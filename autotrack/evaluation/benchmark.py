@@ -33,10 +33,10 @@ import cv2
 import numpy as np
 from tqdm import tqdm
 
-from autotrack import datasets
-from autotrack.datasets import Sequence as BenchmarkSequence
 from autotrack.errors import InputError
-from autotrack.evaluation import (
+from autotrack.evaluation import datasets
+from autotrack.evaluation.datasets import Sequence as BenchmarkSequence
+from autotrack.evaluation.metrics import (
     PRECISION_THRESHOLDS,
     SUCCESS_THRESHOLDS,
     SequenceScore,
@@ -46,7 +46,7 @@ from autotrack.evaluation import (
     summarize_by_attribute,
     summarize_by_dataset,
 )
-from autotrack.peers import TRACKER_NAMES, colour_feature_of, make_tracker
+from autotrack.evaluation.peers import TRACKER_NAMES, colour_feature_of, make_tracker
 
 DEFAULT_OUT_DIR = Path("results")
 """Where results go when no --out is given (relative to the current directory)."""
@@ -474,7 +474,7 @@ def write_run_plots(
     summaries: Mapping[str, TrackerSummary], out_dir: str | Path, title: str = ""
 ) -> list[Path]:
     """Precision and success plots of a run (overall, per dataset, per attribute) as PNGs."""
-    from autotrack.plots import write_plots
+    from autotrack.evaluation.plots import write_plots
 
     def regroup(kind: str) -> dict[str, dict[str, SummaryScore]]:
         grouped: dict[str, dict[str, SummaryScore]] = {}

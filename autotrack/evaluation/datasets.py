@@ -37,7 +37,7 @@ from pathlib import Path
 import numpy as np
 
 from autotrack.errors import InputError
-from autotrack.frames import ImageSequence, list_image_files
+from autotrack.io.frames import ImageSequence, list_image_files
 
 GROUND_TRUTH_FILE = "groundtruth_rect.txt"
 SEQUENCE_RANGES_FILES = ("sequence_ranges.json", "sequence_ranges.txt")

@@ -49,7 +49,7 @@ class AutoTrackPeer:
     """AutoTrack (or one of its ablation presets) returning boxes only."""
 
     def __init__(self, preset_name: str, colour_table: str | Path | None = None) -> None:
-        from autotrack.tracker import AutoTrack
+        from autotrack.tracker.tracker import AutoTrack
 
         self.params = preset(preset_name, colour_table)
         self._tracker = AutoTrack(self.params)

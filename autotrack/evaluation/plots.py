@@ -15,8 +15,8 @@ import numpy as np
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 
-from autotrack.datasets import ATTRIBUTE_FULL_NAMES
-from autotrack.evaluation import PRECISION_THRESHOLDS, SUCCESS_THRESHOLDS, SummaryScore
+from autotrack.evaluation.datasets import ATTRIBUTE_FULL_NAMES
+from autotrack.evaluation.metrics import PRECISION_THRESHOLDS, SUCCESS_THRESHOLDS, SummaryScore
 
 _LINE_STYLES = ("-", "--", "-.", ":")
 

@@ -32,9 +32,9 @@ from scipy.optimize import least_squares
 from scipy.spatial.transform import Rotation
 
 from autotrack.errors import BoxError, InputError
+from autotrack.localization.scene import CameraIntrinsics, Scene
 from autotrack.params import TrackerParams
 from autotrack.result import TrackResult
-from autotrack.scene import CameraIntrinsics, Scene
 
 Box = tuple[float, float, float, float]
 
@@ -729,7 +729,7 @@ def localize_sequence(
             raise BoxError(f"box of landmark {landmark_id} must be [x, y, w, h] with w, h > 0")
     # The tracker pulls in numba-compiled features: import it here so that the pose maths, TUM
     # files and metrics stay light to import (as the package's own __init__ does).
-    from autotrack.multi import MultiTracker
+    from autotrack.tracker.multi import MultiTracker
 
     localizer = Localizer(scene, localizer_params or LocalizerParams())
     tracker = MultiTracker(tracker_params, tuple(boxes), threads=threads)

@@ -39,10 +39,10 @@ from mcap.stream_reader import CRCValidationError, StreamReader
 from mcap.writer import CompressionType, Writer
 
 import autotrack
-from autotrack import foxglove
 from autotrack.errors import SessionError
 from autotrack.params import TrackerParams
 from autotrack.result import TrackResult
+from autotrack.sessions import schemas as foxglove
 
 FORMAT_VERSION = 1
 """Version of the session layout this package writes and the newest it reads."""
@@ -1320,7 +1320,7 @@ def write_otb_tracks(
     """One `<target>.txt` per target in the benchmark format (autotrack.datasets.write_boxes):
     a line `x,y,w,h` per frame 0..last, 1-BASED x and y, `NaN` where the target has no box.
     Targets the user deleted are not written."""
-    from autotrack.datasets import write_boxes
+    from autotrack.evaluation.datasets import write_boxes
 
     directory = Path(directory)
     try:
@@ -1367,7 +1367,7 @@ def write_tum_poses(session: Session, path: str | Path, *, overwrite: bool = Fal
 
     Returns the number of poses written.
     """
-    from autotrack.localize import write_tum
+    from autotrack.localization.localizer import write_tum
 
     path = Path(path)
     if path.exists() and not overwrite:

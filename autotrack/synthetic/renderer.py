@@ -29,8 +29,8 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from autotrack.errors import InputError
-from autotrack.localize import project_points, write_tum
-from autotrack.scene import CameraIntrinsics, Landmark, Scene, save_scene
+from autotrack.localization.localizer import project_points, write_tum
+from autotrack.localization.scene import CameraIntrinsics, Landmark, Scene, save_scene
 
 TRAJECTORIES = (
     "circle",

@@ -25,8 +25,8 @@ import scipy.linalg
 from numba import njit
 
 from autotrack.errors import InputError
-from autotrack.fhog import fhog, fhog_batch, fhog_channels
 from autotrack.params import TrackerParams
+from autotrack.tracker.fhog import fhog, fhog_batch, fhog_channels
 
 GREY_CHANNELS = 1
 FHOG_CHANNELS = fhog_channels(9) - 1  # the toolbox's all-zero truncation channel is dropped

@@ -17,7 +17,7 @@ import numpy as np
 from autotrack.errors import InputError
 from autotrack.params import TrackerParams
 from autotrack.result import TrackResult
-from autotrack.tracker import AutoTrack
+from autotrack.tracker.tracker import AutoTrack
 
 Box = Sequence[float]
 

@@ -7,9 +7,9 @@ import math
 import numpy as np
 import scipy.fft
 
-from autotrack.features import scale_features
 from autotrack.params import TrackerParams
-from autotrack.sampling import scale_patches
+from autotrack.tracker.features import scale_features
+from autotrack.tracker.sampling import scale_patches
 
 
 def symmetric_hann(n: int) -> np.ndarray:

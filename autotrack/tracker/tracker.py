@@ -13,13 +13,13 @@ from collections.abc import Sequence
 import cv2
 import numpy as np
 
-from autotrack import dcf, regularization
 from autotrack.errors import BoxError, InputError
-from autotrack.features import extract_features, feature_dim, is_grey, load_colour_table
 from autotrack.params import TrackerParams
 from autotrack.result import TrackResult
-from autotrack.sampling import search_patch
-from autotrack.scale import ScaleFilter
+from autotrack.tracker import dcf, regularization
+from autotrack.tracker.features import extract_features, feature_dim, is_grey, load_colour_table
+from autotrack.tracker.sampling import search_patch
+from autotrack.tracker.scale import ScaleFilter
 
 
 def validate_box(box: Sequence[float], image_size_wh: tuple[int, int]) -> tuple[float, ...]:

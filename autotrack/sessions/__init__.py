@@ -1,0 +1,1 @@
+"""Sessions in MCAP: schemas and topics, recorder, reader, exports."""
