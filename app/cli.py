@@ -1,4 +1,8 @@
-"""`autotrack app [SEQUENCE]`: the browser app (viser) to annotate, track and debug."""
+"""`autotrack app [SEQUENCE]`: the browser app (viser) to annotate, track and debug.
+
+The library's `autotrack` command finds this sub-command through the `autotrack.commands`
+entry-point group (pyproject.toml), so the library never imports the app.
+"""
 
 from __future__ import annotations
 
@@ -10,6 +14,7 @@ import threading
 from dataclasses import replace
 from pathlib import Path
 
+from app.config import AppConfig
 from autotrack.errors import InputError
 from autotrack.params import PRESETS
 
@@ -17,6 +22,7 @@ LOOPBACK_HOSTS = ("127.0.0.1", "localhost", "::1")
 
 
 def add_parser(subparsers: argparse._SubParsersAction) -> None:
+    """Add `autotrack app` to the `autotrack` command line."""
     parser = subparsers.add_parser(
         "app",
         help="open the browser app: draw boxes, watch AutoTrack, see the camera trajectory",
@@ -93,7 +99,7 @@ def rendered_demo() -> Path:
     The renderer is deterministic, so this is the same sequence as static/demo; it is rendered
     once (a few seconds) and reused.
     """
-    from autotrack.synthetic import generate_demo
+    from autotrack.synthetic.renderer import generate_demo
 
     cache = Path(os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache")
     demo = cache / "autotrack-studio" / "demo"
@@ -114,13 +120,14 @@ def rendered_demo() -> Path:
 
 
 def run(args: argparse.Namespace) -> int:
+    """Start the app and serve until Ctrl-C or SIGTERM."""
     if not 0 <= args.port <= 65535:
         raise InputError(f"--port must be 0..65535, got {args.port}")
     if not args.canvas_fps > 0:
         raise InputError(f"--canvas-fps must be positive, got {args.canvas_fps}")
     roots = startup_roots(args.sequence, args.scene, args.allow_roots)
 
-    from app.server import AppConfig, StudioServer  # viser loads only for this command
+    from app.server import StudioServer  # viser loads only when the app starts
 
     config = AppConfig(
         sequence=None if args.sequence is None else args.sequence.resolve(),
