@@ -23,9 +23,10 @@ from autotrack.evaluation.benchmark import (
     summary_json,
     write_run_plots,
 )
-from autotrack.evaluation.datasets import load_sequences, read_boxes
+from autotrack.evaluation.datasets import load_sequences
 from autotrack.evaluation.metrics import SequenceScore, score_sequence, summarize
 from autotrack.evaluation.peers import TRACKER_NAMES
+from autotrack.io.otb_boxes import read_boxes
 
 REPO = Path(__file__).resolve().parents[1]
 SHARED = REPO / ".." / "shared" / "data"

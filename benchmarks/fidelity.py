@@ -18,9 +18,10 @@ from pathlib import Path
 import numpy as np
 
 from autotrack import AutoTrack, preset
-from autotrack.evaluation.datasets import load_otb_sequence, read_boxes, write_boxes
+from autotrack.evaluation.datasets import load_otb_sequence
 from autotrack.evaluation.metrics import auc, center_errors, overlaps, precision_at, success_curve
 from autotrack.io.frames import read_image
+from autotrack.io.otb_boxes import read_boxes, write_boxes
 
 SHARED = Path(__file__).resolve().parents[1] / ".." / "shared" / "data"
 UAV_DATASETS = {"UAV123_10fps", "DTB70", "UAVDT"}

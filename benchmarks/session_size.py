@@ -14,10 +14,10 @@ import tempfile
 from pathlib import Path
 
 from autotrack.io.frames import open_frames
-from autotrack.localization.localizer import localize_sequence
 from autotrack.localization.scene import load_scene
 from autotrack.params import preset
-from autotrack.sessions.recorder import SessionRecorder
+from autotrack.pipeline import localize_sequence
+from autotrack.sessions import SessionRecorder
 
 DEMO = Path(__file__).resolve().parents[1] / "static" / "demo"
 

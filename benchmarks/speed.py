@@ -57,10 +57,11 @@ def _in_fresh_process(tracker: str, colour_table: str | None) -> dict:
 def multi_target_pose(frames_count: int, threads: int) -> tuple[float, int, float]:
     """Seconds per frame of four AutoTrack targets + the pose step on rendered 1280x720 frames."""
     from autotrack.io.frames import open_frames
-    from autotrack.localization.localizer import localize_sequence
     from autotrack.localization.scene import load_scene
     from autotrack.params import preset
-    from autotrack.synthetic.renderer import render_sequence, sequence_specs
+    from autotrack.pipeline import localize_sequence
+    from autotrack.synthetic.renderer import render_sequence
+    from autotrack.synthetic.testbed import sequence_specs
 
     spec = sequence_specs(1, frames=frames_count, seed=3)[0]
     with tempfile.TemporaryDirectory() as folder:
@@ -89,8 +90,8 @@ def guard(boxes_by_sequence: dict[str, np.ndarray]) -> bool:
     mean precision@20 or mean AUC over the twelve sequences moving by more than 0.01 (the spec's
     bound for rounding noise), or a sequence whose boxes differ from its very first frames.
     """
-    from autotrack.evaluation.datasets import read_boxes
     from autotrack.evaluation.metrics import score_sequence
+    from autotrack.io.otb_boxes import read_boxes
 
     print(
         f"\nregression guard (AutoTrack + published table vs {REFERENCE.name}/, {TOLERANCE_PX} px)"

@@ -24,9 +24,10 @@ from autotrack.evaluation.benchmark import (
     summarize_run,
     summary_json,
 )
-from autotrack.evaluation.datasets import Sequence, load_sequences, read_boxes
+from autotrack.evaluation.datasets import Sequence, load_sequences
 from autotrack.evaluation.metrics import score_sequence
 from autotrack.evaluation.peers import TRACKER_NAMES, OpenCVPeer, make_tracker
+from autotrack.io.otb_boxes import read_boxes
 
 REPO = Path(__file__).resolve().parents[1]
 SHARED = REPO / ".." / "shared" / "data"

@@ -9,14 +9,8 @@ import numpy as np
 import pytest
 
 from autotrack.errors import InputError
-from autotrack.evaluation.datasets import (
-    Sequence,
-    detect_layout,
-    load_sequences,
-    load_uav123,
-    read_boxes,
-    write_boxes,
-)
+from autotrack.evaluation.datasets import Sequence, detect_layout, load_sequences, load_uav123
+from autotrack.io.otb_boxes import read_boxes, write_boxes
 
 SHARED = Path(__file__).resolve().parents[1] / ".." / "shared" / "data" / "sequences"
 

@@ -7,8 +7,9 @@ from pathlib import Path
 import numpy as np
 
 from autotrack.cli import main
-from autotrack.evaluation.datasets import read_boxes
-from autotrack.localization.localizer import read_tum
+from autotrack.io.otb_boxes import read_boxes
+from autotrack.io.tum import read_tum
+from autotrack.sessions import open_session
 
 DEMO = Path(__file__).resolve().parents[1] / "static" / "demo"
 
@@ -37,9 +38,12 @@ def test_localize_session_round_trips_to_the_same_tracks_and_poses(tmp_path, cap
     direct, replayed = read_tum(poses), read_tum(exported / "poses.tum")
     for a, b in zip(direct, replayed, strict=True):
         np.testing.assert_allclose(a, b, atol=1e-6)
-    # Same per-frame boxes as the localize CSV, per landmark.
+    # Same per-frame boxes as the localize CSV, per landmark (targets are T1.., each with the
+    # landmark it localises).
     columns = np.genfromtxt(tracks_csv, delimiter=",", names=True, dtype=None, encoding="utf-8")
-    for landmark in ("A", "B", "C", "D"):
-        boxes = read_boxes(exported / "tracks" / f"{landmark}.txt")
+    target_of = {lm: target for target, lm in open_session(session).landmark_ids.items()}
+    assert sorted(target_of) == ["A", "B", "C", "D"]
+    for landmark, target in target_of.items():
+        boxes = read_boxes(exported / "tracks" / f"{target}.txt")
         expected = np.stack([columns[f"{landmark}_{k}"] for k in "xywh"], axis=1)
         np.testing.assert_allclose(boxes, expected, atol=0.01)

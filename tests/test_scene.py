@@ -8,8 +8,8 @@ import numpy as np
 import pytest
 
 from autotrack.errors import SceneError
+from autotrack.localization.camera import CameraIntrinsics
 from autotrack.localization.scene import (
-    CameraIntrinsics,
     Landmark,
     Scene,
     load_scene,

@@ -24,7 +24,7 @@ import pytest
 
 from autotrack.cli import main
 from autotrack.errors import SessionError
-from autotrack.sessions.recorder import open_session
+from autotrack.sessions import open_session
 
 REPO_ROOT = Path(__file__).resolve().parents[1]
 MIN_MESSAGES = 60
@@ -35,7 +35,7 @@ CHILD = r"""
 import json, math, sys, time
 import numpy as np
 from autotrack.params import TrackerParams
-from autotrack.sessions.recorder import SessionRecorder
+from autotrack.sessions import SessionRecorder
 from autotrack.tracker.tracker import AutoTrack
 
 path = sys.argv[1]

@@ -8,9 +8,10 @@ import numpy as np
 import pytest
 
 from autotrack import AutoTrack, BoxError, CvAutoTrack, InputError, TrackerParams, preset
-from autotrack.evaluation.datasets import load_otb_sequence, read_boxes
+from autotrack.evaluation.datasets import load_otb_sequence
 from autotrack.evaluation.metrics import center_errors, overlaps, precision_at
 from autotrack.io.frames import read_image
+from autotrack.io.otb_boxes import read_boxes
 from tests.sequences import moving_target_sequence
 
 SHARED = Path(__file__).resolve().parents[1] / ".." / "shared" / "data"

@@ -11,7 +11,7 @@ from typing import Any
 import numpy as np
 
 from autotrack.errors import SessionError
-from autotrack.sessions.recorder import (
+from autotrack.sessions import (
     Session,
     open_session,
     write_otb_tracks,

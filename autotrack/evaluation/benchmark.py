@@ -34,7 +34,6 @@ import numpy as np
 from tqdm import tqdm
 
 from autotrack.errors import InputError
-from autotrack.evaluation import datasets
 from autotrack.evaluation.datasets import Sequence as BenchmarkSequence
 from autotrack.evaluation.metrics import (
     PRECISION_THRESHOLDS,
@@ -47,6 +46,7 @@ from autotrack.evaluation.metrics import (
     summarize_by_dataset,
 )
 from autotrack.evaluation.peers import TRACKER_NAMES, colour_feature_of, make_tracker
+from autotrack.io import otb_boxes
 
 DEFAULT_OUT_DIR = Path("results")
 """Where results go when no --out is given (relative to the current directory)."""
@@ -153,7 +153,7 @@ def save_result(out_dir: Path, result: TaskResult, colour_feature: str | None) -
     """Write the box file, then the timing file (its presence marks the pair as done)."""
     boxes_path, timing_path = result_paths(out_dir, result.tracker, result.sequence)
     boxes_path.parent.mkdir(parents=True, exist_ok=True)
-    _write_atomic(boxes_path, lambda path: datasets.write_boxes(path, result.boxes))
+    _write_atomic(boxes_path, lambda path: otb_boxes.write_boxes(path, result.boxes))
     timing = {
         "tracker": result.tracker,
         "sequence": result.sequence,
@@ -175,7 +175,7 @@ def load_result(
         return None
     try:
         timing = json.loads(timing_path.read_text())
-        boxes = datasets.read_boxes(boxes_path)
+        boxes = otb_boxes.read_boxes(boxes_path)
         times = np.asarray(timing["times"], dtype=np.float64)
     except (InputError, ValueError, KeyError, TypeError):
         return None

@@ -131,6 +131,30 @@ class ImageSequence(FrameSource):
         """Nothing to release: each read opens and closes its file."""
 
 
+class InMemoryFrames(FrameSource):
+    """Frames already decoded (RGB or grey uint8 arrays), e.g. rendered or edited in memory."""
+
+    def __init__(self, frames: Sequence[np.ndarray], name: str, fps: float | None = None) -> None:
+        if not frames:
+            raise InputError(f"{name}: no frames")
+        self.frames = list(frames)
+        self.name = name
+        self.fps = fps
+
+    def __len__(self) -> int:
+        return len(self.frames)
+
+    def read(self, index: int) -> np.ndarray:
+        return self.frames[self._check_index(index)]
+
+    def _read_bgr(self, index: int) -> np.ndarray:
+        frame = self.frames[index]
+        return cv2.cvtColor(frame, cv2.COLOR_RGB2BGR) if frame.ndim == 3 else frame
+
+    def close(self) -> None:
+        """Nothing to release."""
+
+
 class VideoFrames(FrameSource):
     """Frames decoded from a video file by OpenCV, in order, with a small cache."""
 

@@ -19,26 +19,28 @@ world axes, `position` is the camera centre in world metres.
 
 from __future__ import annotations
 
-import itertools
 import math
 from collections import deque
-from collections.abc import Iterable, Iterator, Mapping, Sequence
+from collections.abc import Mapping
 from dataclasses import dataclass, field
-from pathlib import Path
 
 import cv2
 import numpy as np
-from scipy.optimize import least_squares
-from scipy.spatial.transform import Rotation
 
-from autotrack.errors import BoxError, InputError
-from autotrack.localization.scene import CameraIntrinsics, Scene
-from autotrack.params import TrackerParams
-from autotrack.result import TrackResult
-
-Box = tuple[float, float, float, float]
-
-_LM_CRITERIA = (cv2.TERM_CRITERIA_EPS + cv2.TERM_CRITERIA_COUNT, 50, 1e-12)
+from autotrack.errors import InputError
+from autotrack.localization.camera import camera_pose_from_pnp, rotation_angle_deg
+from autotrack.localization.pnp import (
+    Fit,
+    fit_pose,
+    in_front,
+    p3p_solutions,
+    position_std,
+    refine_pose,
+    reprojection,
+    solve_pose,
+)
+from autotrack.localization.scene import Scene
+from autotrack.result import PoseEstimate
 
 
 @dataclass(frozen=True)
@@ -81,297 +83,8 @@ class LocalizerParams:
     """Every landmark used must lie at least this far in front of the camera (metres)."""
 
 
-@dataclass(frozen=True)
-class PoseEstimate:
-    """Camera pose of one frame, or the reason there is none to trust."""
-
-    frame_index: int
-    """0-based index of the frame."""
-    valid: bool
-    """True when the pose passed every check; False poses carry NaN rotation and position."""
-    rotation: np.ndarray
-    """Camera-to-world rotation (3x3): columns are the camera axes in world coordinates."""
-    position: np.ndarray
-    """Camera centre in world coordinates (3,), metres."""
-    reprojection_errors: dict[str, float]
-    """Distance (px) between each landmark's reprojection and its box centre, NaN if unused."""
-    used_landmarks: tuple[str, ...]
-    """Landmarks the pose was solved from."""
-    reason: str = ""
-    """Empty when valid, else why the frame is not trusted."""
-    rms_error_px: float = math.nan
-    """RMS reprojection error over the landmarks used (px)."""
-    position_std_m: float = math.nan
-    """Predicted 1-sigma uncertainty of the camera position (metres, all axes together)."""
-    excluded_landmarks: dict[str, str] = field(default_factory=dict)
-    """Landmarks left out of the solve and why (lost, low peak score, aberrant, outlier)."""
-
-    def quaternion_xyzw(self) -> np.ndarray:
-        """The rotation as a unit quaternion (qx, qy, qz, qw), TUM order; NaN when invalid."""
-        if not np.all(np.isfinite(self.rotation)):
-            return np.full(4, np.nan)
-        return Rotation.from_matrix(self.rotation).as_quat(canonical=True)
-
-
-@dataclass(frozen=True)
-class LocalizationFrame:
-    """Everything the pipeline produced for one frame."""
-
-    frame_index: int
-    tracks: dict[str, TrackResult]
-    """Tracker output per landmark id."""
-    image_points: dict[str, tuple[float, float]]
-    """Box centre per landmark id (the point given to the solver)."""
-    pose: PoseEstimate
-
-
-@dataclass(frozen=True)
-class _Fit:
-    rvec: np.ndarray
-    tvec: np.ndarray
-    ids: tuple[str, ...]
-    errors: np.ndarray
-    rms: float
-
-
-# ---------------------------------------------------------------------------------------------
-# Pure geometry
-
-
-def camera_pose_from_pnp(rvec: np.ndarray, tvec: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """(rotation camera-to-world, camera centre) from OpenCV's world-to-camera rvec, tvec."""
-    rotation_cw, _ = cv2.Rodrigues(np.asarray(rvec, dtype=np.float64).reshape(3, 1))
-    # x_cam = R_cw x_world + t  =>  camera centre C = -R_cw^T t, R_wc = R_cw^T
-    centre = -rotation_cw.T @ np.asarray(tvec, dtype=np.float64).reshape(3)
-    return rotation_cw.T, centre
-
-
-def pnp_from_camera_pose(
-    rotation: np.ndarray, position: np.ndarray
-) -> tuple[np.ndarray, np.ndarray]:
-    """OpenCV's (rvec, tvec) from a camera-to-world rotation and camera centre."""
-    rotation_cw = np.asarray(rotation, dtype=np.float64).T
-    rvec, _ = cv2.Rodrigues(rotation_cw)
-    tvec = -rotation_cw @ np.asarray(position, dtype=np.float64).reshape(3)
-    return rvec.reshape(3), tvec
-
-
-def project_points(
-    camera: CameraIntrinsics, points_world: np.ndarray, rotation: np.ndarray, position: np.ndarray
-) -> np.ndarray:
-    """Pixel coordinates (n, 2) of world points seen by a camera at (rotation, position)."""
-    rvec, tvec = pnp_from_camera_pose(rotation, position)
-    projected, _ = cv2.projectPoints(
-        np.asarray(points_world, dtype=np.float64).reshape(-1, 1, 3),
-        rvec,
-        tvec,
-        camera.matrix(),
-        camera.distortion_array(),
-    )
-    return projected.reshape(-1, 2)
-
-
-def rotation_angle_deg(rotation_a: np.ndarray, rotation_b: np.ndarray) -> float:
-    """Angle (degrees) of the rotation taking `rotation_a` to `rotation_b`."""
-    cosine = (np.trace(rotation_a.T @ rotation_b) - 1.0) / 2.0
-    return math.degrees(math.acos(float(np.clip(cosine, -1.0, 1.0))))
-
-
-def _reprojection(
-    camera: CameraIntrinsics, object_points: np.ndarray, rvec: np.ndarray, tvec: np.ndarray
-) -> tuple[np.ndarray, np.ndarray]:
-    """Projections (n, 2) and their Jacobian (2n, 6) w.r.t. (rvec, tvec)."""
-    projected, jacobian = cv2.projectPoints(
-        object_points.reshape(-1, 1, 3), rvec, tvec, camera.matrix(), camera.distortion_array()
-    )
-    return projected.reshape(-1, 2), jacobian[:, :6]
-
-
-def refine_pose(
-    camera: CameraIntrinsics,
-    object_points: np.ndarray,
-    image_points: np.ndarray,
-    rvec: np.ndarray,
-    tvec: np.ndarray,
-    weights: np.ndarray | None = None,
-) -> tuple[np.ndarray, np.ndarray]:
-    """Levenberg-Marquardt on the reprojection error, each point's residual scaled by sqrt(weight).
-
-    Equal weights use OpenCV's solvePnPRefineLM; unequal ones the same cost with per-point weights.
-    """
-    rvec = np.asarray(rvec, dtype=np.float64).reshape(3, 1).copy()
-    tvec = np.asarray(tvec, dtype=np.float64).reshape(3, 1).copy()
-    if weights is None or np.allclose(weights, weights[0]):
-        rvec, tvec = cv2.solvePnPRefineLM(
-            object_points.reshape(-1, 1, 3),
-            image_points.reshape(-1, 1, 2),
-            camera.matrix(),
-            camera.distortion_array(),
-            rvec,
-            tvec,
-            criteria=_LM_CRITERIA,
-        )
-        return rvec.reshape(3), tvec.reshape(3)
-    scale = np.repeat(np.sqrt(np.asarray(weights, dtype=np.float64)), 2)
-
-    def residuals(params: np.ndarray) -> np.ndarray:
-        projected, _ = _reprojection(camera, object_points, params[:3], params[3:])
-        return scale * (projected - image_points).reshape(-1)
-
-    def jacobian(params: np.ndarray) -> np.ndarray:
-        _, jac = _reprojection(camera, object_points, params[:3], params[3:])
-        return scale[:, None] * jac
-
-    start = np.concatenate([rvec.reshape(3), tvec.reshape(3)])
-    solution = least_squares(residuals, start, jac=jacobian, method="lm", xtol=1e-12, ftol=1e-12)
-    return solution.x[:3], solution.x[3:]
-
-
-def solve_pose(
-    camera: CameraIntrinsics,
-    object_points: np.ndarray,
-    image_points: np.ndarray,
-    weights: np.ndarray | None = None,
-) -> tuple[np.ndarray, np.ndarray]:
-    """Pose (rvec, tvec, world-to-camera) from four or more correspondences: SQPnP, then LM."""
-    ok, rvec, tvec = cv2.solvePnP(
-        object_points.reshape(-1, 1, 3),
-        image_points.reshape(-1, 1, 2),
-        camera.matrix(),
-        camera.distortion_array(),
-        flags=cv2.SOLVEPNP_SQPNP,
-    )
-    if not ok:
-        raise InputError("SQPnP found no pose for these correspondences")
-    return refine_pose(camera, object_points, image_points, rvec, tvec, weights)
-
-
-def p3p_solutions(
-    camera: CameraIntrinsics, object_points: np.ndarray, image_points: np.ndarray
-) -> list[tuple[np.ndarray, np.ndarray]]:
-    """All P3P poses (rvec, tvec) for exactly three correspondences (up to four)."""
-    count, rvecs, tvecs = cv2.solveP3P(
-        np.ascontiguousarray(object_points, dtype=np.float64).reshape(3, 1, 3),
-        np.ascontiguousarray(image_points, dtype=np.float64).reshape(3, 1, 2),
-        camera.matrix(),
-        camera.distortion_array(),
-        flags=cv2.SOLVEPNP_AP3P,
-    )
-    return [(rvecs[i].reshape(3), tvecs[i].reshape(3)) for i in range(count)]
-
-
-def position_std(
-    camera: CameraIntrinsics,
-    object_points: np.ndarray,
-    rvec: np.ndarray,
-    tvec: np.ndarray,
-    pixel_noise_px: float,
-    weights: np.ndarray | None = None,
-) -> float:
-    """Predicted 1-sigma camera-centre uncertainty (metres) for `pixel_noise_px` image noise.
-
-    First-order propagation: Cov(rvec, tvec) = sigma^2 (J^T W J)^-1, then through C = -R^T t.
-    Infinite when the geometry does not constrain the pose.
-    """
-    _, jac = _reprojection(camera, object_points, rvec, tvec)
-    w = np.ones(len(object_points)) if weights is None else np.asarray(weights, dtype=np.float64)
-    information = jac.T @ (np.repeat(w, 2)[:, None] * jac)
-    try:
-        covariance = pixel_noise_px**2 * np.linalg.inv(information)
-    except np.linalg.LinAlgError:
-        return math.inf
-    if np.linalg.cond(information) > 1e14:
-        return math.inf
-    # d(centre)/d(rvec) by central differences, d(centre)/d(tvec) = -R^T.
-    gradient = np.zeros((3, 6))
-    step = 1e-6
-    for k in range(3):
-        delta = np.zeros(3)
-        delta[k] = step
-        _, plus = camera_pose_from_pnp(rvec + delta, tvec)
-        _, minus = camera_pose_from_pnp(rvec - delta, tvec)
-        gradient[:, k] = (plus - minus) / (2 * step)
-    rotation_cw, _ = cv2.Rodrigues(np.asarray(rvec, dtype=np.float64).reshape(3, 1))
-    gradient[:, 3:] = -rotation_cw.T
-    centre_covariance = gradient @ covariance @ gradient.T
-    return float(math.sqrt(max(np.trace(centre_covariance), 0.0)))
-
-
-def _fit(
-    camera: CameraIntrinsics,
-    ids: tuple[str, ...],
-    object_points: np.ndarray,
-    image_points: np.ndarray,
-    rvec: np.ndarray,
-    tvec: np.ndarray,
-) -> _Fit:
-    projected, _ = _reprojection(camera, object_points, rvec, tvec)
-    errors = np.linalg.norm(projected - image_points, axis=1)
-    return _Fit(rvec, tvec, ids, errors, float(np.sqrt(np.mean(errors**2))))
-
-
-def search_correspondences(
-    points_2d: np.ndarray,
-    scene: Scene,
-    *,
-    max_error_px: float = 5.0,
-) -> dict[str, int]:
-    """Which image point is which landmark, when the assignment is unknown (Faessler et al.).
-
-    For every assignment of the image points to distinct landmarks: P3P on the first three,
-    reproject the remaining landmarks and keep the P3P solution that fits them best; the
-    assignment with the smallest error wins, then its pose is refined on all points. Returns
-    landmark id -> row of `points_2d`, or an empty dict when no assignment reprojects within
-    `max_error_px` (RMS over all points after refinement). A symmetric layout has several
-    equally good answers (scene_warnings flags it); the first found is returned.
-    """
-    points = np.asarray(points_2d, dtype=np.float64).reshape(-1, 2)
-    if len(points) < 4:
-        raise InputError(
-            f"the correspondence search needs at least 4 image points, got {len(points)}"
-        )
-    if len(points) > len(scene.landmarks):
-        raise InputError(
-            f"{len(points)} image points but the scene has only {len(scene.landmarks)} landmarks"
-        )
-    camera = scene.camera
-    best: tuple[float, tuple[str, ...], np.ndarray, np.ndarray] | None = None
-    for chosen in itertools.permutations(scene.landmark_ids, len(points)):
-        object_points = scene.object_points(chosen)
-        try:
-            solutions = p3p_solutions(camera, object_points[:3], points[:3])
-        except cv2.error:  # degenerate image triangle
-            return {}
-        for rvec, tvec in solutions:
-            if not _in_front(object_points, rvec, tvec, 0.0):
-                continue
-            projected, _ = _reprojection(camera, object_points[3:], rvec, tvec)
-            error = float(np.sqrt(np.mean(np.sum((projected - points[3:]) ** 2, axis=1))))
-            if best is None or error < best[0]:
-                best = (error, chosen, rvec, tvec)
-    if best is None:
-        return {}
-    _, chosen, rvec, tvec = best
-    object_points = scene.object_points(chosen)
-    rvec, tvec = refine_pose(camera, object_points, points, rvec, tvec)
-    fit = _fit(camera, chosen, object_points, points, rvec, tvec)
-    if fit.rms > max_error_px:
-        return {}
-    return {landmark_id: row for row, landmark_id in enumerate(chosen)}
-
-
 def _describe(excluded: Mapping[str, str]) -> str:
     return "; ".join(f"{landmark_id} {why}" for landmark_id, why in excluded.items())
-
-
-def _in_front(object_points: np.ndarray, rvec: np.ndarray, tvec: np.ndarray, min_depth: float):
-    rotation_cw, _ = cv2.Rodrigues(np.asarray(rvec, dtype=np.float64).reshape(3, 1))
-    depths = (object_points @ rotation_cw.T + np.asarray(tvec).reshape(1, 3))[:, 2]
-    return bool(np.all(depths > min_depth))
-
-
-# ---------------------------------------------------------------------------------------------
-# The stateful per-frame solver
 
 
 @dataclass
@@ -484,7 +197,7 @@ class Localizer:
         image_points: np.ndarray,
         weights: np.ndarray,
         prior: _Prior | None,
-    ) -> tuple[_Fit | None, str]:
+    ) -> tuple[Fit | None, str]:
         """Four or more points: fit all, then drop outliers one at a time while >= 4 remain;
         with exactly four inconsistent points fall back to the three nearest the prior."""
         camera = self.scene.camera
@@ -493,7 +206,7 @@ class Localizer:
             sub_ids = tuple(ids[k] for k in keep)
             object_points = self.scene.object_points(sub_ids)
             rvec, tvec = solve_pose(camera, object_points, image_points[keep], weights[keep])
-            fit = _fit(camera, sub_ids, object_points, image_points[keep], rvec, tvec)
+            fit = fit_pose(camera, sub_ids, object_points, image_points[keep], rvec, tvec)
             if self._consistent(fit):
                 return fit, ""
             if len(keep) == 4:
@@ -516,7 +229,7 @@ class Localizer:
 
     def _solve_three(
         self, ids: tuple[str, ...], image_points: np.ndarray, prior: _Prior | None
-    ) -> tuple[_Fit | None, str]:
+    ) -> tuple[Fit | None, str]:
         if prior is None:
             return None, (
                 f"only three landmarks ({', '.join(ids)}) and no recent pose to choose among the "
@@ -527,20 +240,20 @@ class Localizer:
             return None, f"no P3P solution from {', '.join(ids)} is in front of the camera"
         return chosen, ""
 
-    def _p3p_fits(self, ids: tuple[str, ...], image_points: np.ndarray) -> list[_Fit]:
+    def _p3p_fits(self, ids: tuple[str, ...], image_points: np.ndarray) -> list[Fit]:
         camera = self.scene.camera
         object_points = self.scene.object_points(ids)
         fits = []
         for rvec, tvec in p3p_solutions(camera, object_points, image_points):
-            if _in_front(object_points, rvec, tvec, self.params.min_depth_m):
+            if in_front(object_points, rvec, tvec, self.params.min_depth_m):
                 rvec, tvec = refine_pose(camera, object_points, image_points, rvec, tvec)
-                fits.append(_fit(camera, ids, object_points, image_points, rvec, tvec))
+                fits.append(fit_pose(camera, ids, object_points, image_points, rvec, tvec))
         return fits
 
-    def _nearest_to_prior(self, fits: list[_Fit], prior: _Prior) -> _Fit | None:
+    def _nearest_to_prior(self, fits: list[Fit], prior: _Prior) -> Fit | None:
         """The fit closest to the prior, distance in units of the per-frame motion bounds."""
         params = self.params
-        best: tuple[float, _Fit] | None = None
+        best: tuple[float, Fit] | None = None
         for fit in fits:
             rotation, position = camera_pose_from_pnp(fit.rvec, fit.tvec)
             distance = float(np.linalg.norm(position - prior.position))
@@ -553,7 +266,7 @@ class Localizer:
                 best = (score, fit)
         return None if best is None else best[1]
 
-    def _consistent(self, fit: _Fit) -> bool:
+    def _consistent(self, fit: Fit) -> bool:
         return (
             fit.rms <= self.params.max_rms_error_px
             and float(fit.errors.max()) <= self.params.max_landmark_error_px
@@ -564,7 +277,7 @@ class Localizer:
     def _checked(
         self,
         frame_index: int,
-        fit: _Fit,
+        fit: Fit,
         weights_all: np.ndarray,
         ids_all: tuple[str, ...],
         prior: _Prior | None,
@@ -578,7 +291,7 @@ class Localizer:
         left_out = [i for i in ids_all if i not in fit.ids]
         if left_out:
             rows = [ids_all.index(i) for i in left_out]
-            projected, _ = _reprojection(
+            projected, _ = reprojection(
                 camera, self.scene.object_points(left_out), fit.rvec, fit.tvec
             )
             for landmark_id, row, point in zip(left_out, rows, projected, strict=True):
@@ -593,7 +306,7 @@ class Localizer:
             camera, object_points, fit.rvec, fit.tvec, params.pixel_noise_px, weights
         )
         reasons = []
-        if not _in_front(object_points, fit.rvec, fit.tvec, params.min_depth_m):
+        if not in_front(object_points, fit.rvec, fit.tvec, params.min_depth_m):
             reasons.append("a landmark would be behind the camera")
         if fit.rms > params.max_rms_error_px:
             reasons.append(f"RMS reprojection error {fit.rms:.1f} px > {params.max_rms_error_px:g}")
@@ -672,288 +385,3 @@ class Localizer:
             reason=reason,
             excluded_landmarks=dict(excluded or {}),
         )
-
-
-# ---------------------------------------------------------------------------------------------
-# The tracking + localisation pipeline
-
-
-def box_centre(box: Sequence[float]) -> tuple[float, float]:
-    """Centre (u, v) of an (x, y, w, h) box, 0-based pixels."""
-    x, y, w, h = (float(v) for v in box)
-    return (x + w / 2.0, y + h / 2.0)
-
-
-def assign_boxes(
-    boxes: Sequence[Box], scene: Scene, *, max_error_px: float = 5.0
-) -> dict[str, Box]:
-    """Landmark id -> box for boxes given without their landmark (correspondence search)."""
-    centres = np.array([box_centre(b) for b in boxes])
-    assignment = search_correspondences(centres, scene, max_error_px=max_error_px)
-    if not assignment:
-        raise InputError(
-            "cannot tell which box is which landmark: no assignment of the box centres to the "
-            "scene's landmarks reprojects within "
-            f"{max_error_px:g} px; check the boxes and the scene, or give boxes.json as "
-            "{landmark id: box}"
-        )
-    return {landmark_id: tuple(boxes[row]) for landmark_id, row in assignment.items()}
-
-
-def localize_sequence(
-    frames: Iterable[np.ndarray],
-    scene: Scene,
-    init_boxes: Mapping[str, Box] | Sequence[Box],
-    tracker_params: TrackerParams,
-    localizer_params: LocalizerParams | None = None,
-    assignment_known: bool = True,
-    threads: int = 1,
-) -> Iterator[LocalizationFrame]:
-    """Track every landmark and estimate the camera pose frame by frame.
-
-    `init_boxes` gives the first frame's boxes (x, y, w, h, 0-based pixels): landmark id -> box
-    when `assignment_known`, otherwise a list (or a mapping with arbitrary keys) of boxes whose
-    landmarks the correspondence search finds on the first frame.
-    """
-    if assignment_known:
-        if not isinstance(init_boxes, Mapping):
-            raise InputError("with a known assignment, the boxes must map landmark id -> box")
-        boxes = {str(k): tuple(float(v) for v in b) for k, b in init_boxes.items()}
-        for landmark_id in boxes:
-            scene.landmark(landmark_id)
-    else:
-        listed = list(init_boxes.values()) if isinstance(init_boxes, Mapping) else list(init_boxes)
-        boxes = assign_boxes([tuple(float(v) for v in b) for b in listed], scene)
-    for landmark_id, box in boxes.items():
-        if len(box) != 4 or not all(math.isfinite(v) for v in box) or box[2] <= 0 or box[3] <= 0:
-            raise BoxError(f"box of landmark {landmark_id} must be [x, y, w, h] with w, h > 0")
-    # The tracker pulls in numba-compiled features: import it here so that the pose maths, TUM
-    # files and metrics stay light to import (as the package's own __init__ does).
-    from autotrack.tracker.multi import MultiTracker
-
-    localizer = Localizer(scene, localizer_params or LocalizerParams())
-    tracker = MultiTracker(tracker_params, tuple(boxes), threads=threads)
-    try:
-        for frame_index, frame in enumerate(frames):
-            if frame_index == 0:
-                _check_frame_size(frame, scene.camera)
-            tracks = tracker.init(frame, boxes) if frame_index == 0 else tracker.update(frame)
-            centres = {i: r.center for i, r in tracks.items()}
-            pose = localizer.estimate(
-                frame_index,
-                centres,
-                confidences={i: r.peak_score for i, r in tracks.items()},
-                aberrant={i: r.aberrant for i, r in tracks.items()},
-            )
-            yield LocalizationFrame(frame_index, tracks, centres, pose)
-    finally:
-        tracker.close()
-
-
-def _check_frame_size(frame: np.ndarray, camera: CameraIntrinsics) -> None:
-    height, width = frame.shape[:2]
-    if (width, height) != (camera.width, camera.height):
-        raise InputError(
-            f"frames are {width}x{height} but the scene's camera is calibrated for "
-            f"{camera.width}x{camera.height}: use intrinsics for this image size"
-        )
-
-
-# ---------------------------------------------------------------------------------------------
-# Trajectories: TUM files and the paper's Table 3 figures
-
-
-def write_tum(
-    path: str | Path,
-    timestamps: Sequence[float] | np.ndarray,
-    positions: np.ndarray,
-    quaternions_xyzw: np.ndarray,
-) -> int:
-    """Write a TUM trajectory (`timestamp tx ty tz qx qy qz qw`, camera-to-world, metres).
-
-    Rows with a non-finite value (invalid poses) are skipped; returns the number written.
-    """
-    timestamps = np.asarray(timestamps, dtype=np.float64).reshape(-1)
-    positions = np.asarray(positions, dtype=np.float64).reshape(-1, 3)
-    quaternions = np.asarray(quaternions_xyzw, dtype=np.float64).reshape(-1, 4)
-    if not len(timestamps) == len(positions) == len(quaternions):
-        raise InputError("timestamps, positions and quaternions must have the same length")
-    lines = ["# timestamp tx ty tz qx qy qz qw (camera-to-world, metres)"]
-    written = 0
-    for stamp, position, quaternion in zip(timestamps, positions, quaternions, strict=True):
-        row = np.concatenate([[stamp], position, quaternion])
-        if not np.all(np.isfinite(row)):
-            continue
-        lines.append(" ".join(f"{v:.6f}" if k == 0 else f"{v:.9g}" for k, v in enumerate(row)))
-        written += 1
-    Path(path).write_text("\n".join(lines) + "\n", encoding="utf-8")
-    return written
-
-
-def read_tum(path: str | Path) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Read a TUM trajectory: timestamps (n,), positions (n, 3), quaternions xyzw (n, 4)."""
-    path = Path(path)
-    try:
-        text = path.read_text(encoding="utf-8")
-    except OSError as error:
-        raise InputError(f"cannot read trajectory {path}: {error.strerror or error}") from None
-    rows = []
-    for line_number, line in enumerate(text.splitlines(), start=1):
-        stripped = line.strip()
-        if not stripped or stripped.startswith("#"):
-            continue
-        fields = stripped.replace(",", " ").split()
-        try:
-            values = [float(v) for v in fields]
-        except ValueError:
-            values = []
-        if len(values) != 8:
-            raise InputError(
-                f"{path}, line {line_number}: expected 8 numbers 'timestamp tx ty tz qx qy qz qw'"
-            )
-        rows.append(values)
-    table = np.array(rows, dtype=np.float64).reshape(-1, 8)
-    return table[:, 0], table[:, 1:4], table[:, 4:8]
-
-
-@dataclass(frozen=True)
-class TrajectoryErrors:
-    """Position errors of an estimated trajectory against ground truth (paper Table 3)."""
-
-    mean_abs_cm: tuple[float, float, float]
-    """Mean |error| along world x, y, z (cm) over the frames with a pose."""
-    rmse_cm: float
-    """Root-mean-square 3-D position error (cm): sqrt(mean(|p - p_gt|^2))."""
-    paper_rmse_cm: float
-    """The figure the paper's Table 3 calls RMSE: the norm of the mean-|error| vector
-    sqrt(x^2 + y^2 + z^2) (every row of the table satisfies this); never above rmse_cm."""
-    max_error_cm: float
-    """Largest 3-D position error (cm)."""
-    frames: int
-    """Ground-truth frames with an estimated pose."""
-    missing_frames: int
-    """Ground-truth frames with no (valid) estimate at the same timestamp."""
-    errors_cm: np.ndarray = field(repr=False, compare=False)
-    """Per associated frame 3-D error (cm)."""
-
-
-def associate(
-    timestamps_a: np.ndarray, timestamps_b: np.ndarray, max_difference_s: float = 0.01
-) -> tuple[np.ndarray, np.ndarray]:
-    """Indices (ia, ib) pairing each stamp of `b` with the nearest stamp of `a` within tolerance."""
-    a = np.asarray(timestamps_a, dtype=np.float64)
-    b = np.asarray(timestamps_b, dtype=np.float64)
-    if len(a) == 0 or len(b) == 0:
-        return np.zeros(0, dtype=int), np.zeros(0, dtype=int)
-    order = np.argsort(a)
-    sorted_a = a[order]
-    right = np.clip(np.searchsorted(sorted_a, b), 0, len(a) - 1)
-    left = np.clip(right - 1, 0, len(a) - 1)
-    nearest = np.where(np.abs(sorted_a[left] - b) <= np.abs(sorted_a[right] - b), left, right)
-    matched = np.abs(sorted_a[nearest] - b) <= max_difference_s
-    return order[nearest[matched]], np.flatnonzero(matched)
-
-
-def trajectory_errors(
-    timestamps: np.ndarray,
-    positions: np.ndarray,
-    gt_timestamps: np.ndarray,
-    gt_positions: np.ndarray,
-    max_difference_s: float = 0.01,
-) -> TrajectoryErrors:
-    """Table-3 errors of `positions` (metres) against ground truth, matched by timestamp.
-
-    Positions with NaN (invalid frames) count as missing.
-    """
-    positions = np.asarray(positions, dtype=np.float64).reshape(-1, 3)
-    gt_positions = np.asarray(gt_positions, dtype=np.float64).reshape(-1, 3)
-    finite = np.all(np.isfinite(positions), axis=1)
-    index_est, index_gt = associate(np.asarray(timestamps)[finite], gt_timestamps, max_difference_s)
-    difference = (positions[finite][index_est] - gt_positions[index_gt]) * 100.0
-    frames = len(index_gt)
-    if frames == 0:
-        nan = math.nan
-        return TrajectoryErrors((nan, nan, nan), nan, nan, nan, 0, len(gt_timestamps), np.zeros(0))
-    mean_abs = np.mean(np.abs(difference), axis=0)
-    errors = np.linalg.norm(difference, axis=1)
-    return TrajectoryErrors(
-        mean_abs_cm=(float(mean_abs[0]), float(mean_abs[1]), float(mean_abs[2])),
-        rmse_cm=float(np.sqrt(np.mean(errors**2))),
-        paper_rmse_cm=float(np.linalg.norm(mean_abs)),
-        max_error_cm=float(errors.max()),
-        frames=frames,
-        missing_frames=len(gt_timestamps) - frames,
-        errors_cm=errors,
-    )
-
-
-def format_table3(rows: Sequence[tuple[str, TrajectoryErrors]]) -> str:
-    """The paper's Table 3 layout (x, y, z mean |error|, RMSE in cm, frames) plus our columns.
-
-    Adds the paper's RMSE form, the largest error and the frames without a trusted pose; the
-    'Average' row averages the rows as the paper does, 'All frames' pools every frame.
-    """
-    header = (
-        f"{'Dataset':<20}{'x(cm)':>8}{'y(cm)':>8}{'z(cm)':>8}{'RMSE':>8}"
-        f"{'paperRMSE':>11}{'max(cm)':>9}{'Frames':>8}{'invalid':>9}"
-    )
-    lines = [header, "-" * len(header)]
-
-    def line(
-        name: str,
-        x: float,
-        y: float,
-        z: float,
-        rmse: float,
-        paper: float,
-        worst: float,
-        frames: float,
-        missing: float,
-    ) -> str:
-        return (
-            f"{name:<20}{x:>8.2f}{y:>8.2f}{z:>8.2f}{rmse:>8.2f}{paper:>11.2f}{worst:>9.2f}"
-            f"{frames:>8.0f}{missing:>9.0f}"
-        )
-
-    for name, e in rows:
-        lines.append(
-            line(
-                name,
-                *e.mean_abs_cm,
-                e.rmse_cm,
-                e.paper_rmse_cm,
-                e.max_error_cm,
-                e.frames,
-                e.missing_frames,
-            )
-        )
-    if len(rows) > 1:
-        stats = [e for _, e in rows]
-        means = np.array([e.mean_abs_cm for e in stats]).mean(axis=0)
-        lines.append("-" * len(header))
-        lines.append(
-            line(
-                "Average",
-                *means,
-                float(np.mean([e.rmse_cm for e in stats])),
-                float(np.linalg.norm(means)),
-                max(e.max_error_cm for e in stats),
-                float(np.mean([e.frames for e in stats])),
-                float(np.mean([e.missing_frames for e in stats])),
-            )
-        )
-        pooled = np.concatenate([e.errors_cm for e in stats])
-        total_frames = sum(e.frames for e in stats)
-        weighted = sum(np.array(e.mean_abs_cm) * e.frames for e in stats) / max(total_frames, 1)
-        lines.append(
-            line(
-                "All frames",
-                *weighted,
-                float(np.sqrt(np.mean(pooled**2))),
-                float(np.linalg.norm(weighted)),
-                float(pooled.max()),
-                total_frames,
-                sum(e.missing_frames for e in stats),
-            )
-        )
-    return "\n".join(lines)

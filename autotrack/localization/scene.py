@@ -25,6 +25,7 @@ from typing import Any
 import numpy as np
 
 from autotrack.errors import SceneError
+from autotrack.localization.camera import CameraIntrinsics
 
 # Numbers of distortion coefficients OpenCV accepts: (k1 k2 p1 p2 [k3 [k4 k5 k6 [s1..s4 [tx ty]]]]).
 DISTORTION_LENGTHS = (0, 4, 5, 8, 12, 14)
@@ -32,49 +33,6 @@ MIN_LANDMARKS = 4
 
 _CAMERA_FIELDS = ("fx", "fy", "cx", "cy", "width", "height")
 _LANDMARK_FIELDS = ("id", "position")
-
-
-@dataclass(frozen=True)
-class CameraIntrinsics:
-    """Pinhole camera with OpenCV distortion, in pixels of a `width` x `height` image."""
-
-    fx: float
-    """Focal length along x (pixels)."""
-    fy: float
-    """Focal length along y (pixels)."""
-    cx: float
-    """Principal point x (pixels, 0-based: the top-left pixel's centre is 0)."""
-    cy: float
-    """Principal point y (pixels, 0-based)."""
-    distortion: tuple[float, ...] = ()
-    """OpenCV distortion coefficients (k1, k2, p1, p2[, k3, ...]); empty for none."""
-    width: int = 0
-    """Image width (pixels)."""
-    height: int = 0
-    """Image height (pixels)."""
-
-    def matrix(self) -> np.ndarray:
-        """The 3x3 camera matrix K (float64)."""
-        return np.array(
-            [[self.fx, 0.0, self.cx], [0.0, self.fy, self.cy], [0.0, 0.0, 1.0]], dtype=np.float64
-        )
-
-    def distortion_array(self) -> np.ndarray:
-        """Distortion coefficients as a float64 array (length 0 when there is no distortion)."""
-        return np.asarray(self.distortion, dtype=np.float64)
-
-    def scaled(self, factor: float) -> CameraIntrinsics:
-        """The same camera for images resized by `factor` (distortion is scale-free)."""
-        # Pixel centres sit at integer coordinates, so the principal point scales about -0.5.
-        return CameraIntrinsics(
-            fx=self.fx * factor,
-            fy=self.fy * factor,
-            cx=(self.cx + 0.5) * factor - 0.5,
-            cy=(self.cy + 0.5) * factor - 0.5,
-            distortion=self.distortion,
-            width=round(self.width * factor),
-            height=round(self.height * factor),
-        )
 
 
 @dataclass(frozen=True)

@@ -1,610 +1,128 @@
-"""Foxglove well-known message schemas (JSON Schema) and builders for the messages we record.
+"""The session's channels: their JSON schemas, encodings and topics.
 
-Foxglove opens an MCAP file with no plugin when a channel's schema is named after one of its
-well-known messages (`foxglove.PoseInFrame`, ...), the schema encoding is `jsonschema` and the
-message encoding is `json`. The field tables below follow Foxglove's schema definitions
-(github.com/foxglove/foxglove-sdk, `typescript/schemas/src/internal/schemas.ts`) and
-`json_schema` renders them the way Foxglove's own generator does (`generateJsonSchema.ts`): a
-timestamp is `{"sec", "nsec"}`, bytes are base64 strings, enums are `oneOf` constants, and no
-field is required. Descriptions are shortened.
+Every schema is a JSON file in `jsonschema/` (Foxglove's published well-known schemas, and
+ours), loaded here with importlib.resources; schema and message encodings are the constants of
+`mcap.well_known`. Topics are built and read back by `TargetTopic` and the `Topics` constants,
+nowhere else.
 """
 
 from __future__ import annotations
 
-import base64
 import json
-from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
+from enum import StrEnum
+from functools import cache
+from importlib import resources
 from typing import Any
 
-import numpy as np
+from mcap.well_known import MessageEncoding, SchemaEncoding
 
-# --- schema model -----------------------------------------------------------------------------
+from autotrack.errors import SessionError
+
+SCHEMA_ENCODING = SchemaEncoding.JSONSchema
+"""Encoding of every schema we register ("jsonschema")."""
+MESSAGE_ENCODING = MessageEncoding.JSON
+"""Encoding of every message we write ("json")."""
+
+FOXGLOVE_IMAGE_ANNOTATIONS = "foxglove.ImageAnnotations"
+FOXGLOVE_RAW_IMAGE = "foxglove.RawImage"
+FOXGLOVE_COMPRESSED_IMAGE = "foxglove.CompressedImage"
+FOXGLOVE_POSE_IN_FRAME = "foxglove.PoseInFrame"
+FOXGLOVE_FRAME_TRANSFORM = "foxglove.FrameTransform"
+FOXGLOVE_SCENE_UPDATE = "foxglove.SceneUpdate"
+TARGET_SIGNALS = "autotrack.TargetSignals"
+POSE_QUALITY = "autotrack.PoseQuality"
+SESSION_EVENT = "autotrack.SessionEvent"
+
+SCHEMA_NAMES = (
+    FOXGLOVE_IMAGE_ANNOTATIONS,
+    FOXGLOVE_RAW_IMAGE,
+    FOXGLOVE_COMPRESSED_IMAGE,
+    FOXGLOVE_POSE_IN_FRAME,
+    FOXGLOVE_FRAME_TRANSFORM,
+    FOXGLOVE_SCENE_UPDATE,
+    TARGET_SIGNALS,
+    POSE_QUALITY,
+    SESSION_EVENT,
+)
+"""Every schema a session uses, by the name its JSON file and MCAP schema record carry."""
+
+WORLD_FRAME = "world"
+CAMERA_FRAME = "camera"
+
+
+@cache
+def schema_document(name: str) -> dict[str, Any]:
+    """The JSON Schema document named `name` (e.g. "foxglove.RawImage")."""
+    if name not in SCHEMA_NAMES:
+        raise SessionError(f"no schema named {name!r}")
+    path = resources.files("autotrack.sessions") / "jsonschema" / f"{name}.json"
+    return json.loads(path.read_text(encoding="utf-8"))
+
+
+def schema_bytes(name: str) -> bytes:
+    """The schema as written into a session file (compact JSON)."""
+    return json.dumps(schema_document(name), separators=(",", ":")).encode("utf-8")
 
 
 @dataclass(frozen=True)
-class EnumSchema:
-    """A Foxglove enum: its name and (name, value, description) entries."""
+class Topic:
+    """A channel of fixed name and the schema of its messages."""
 
     name: str
-    values: tuple[tuple[str, int, str], ...]
+    schema: str
 
 
-@dataclass(frozen=True)
-class Field:
-    """One field of a Foxglove message.
+class Topics:
+    """The session's fixed channels."""
 
-    `kind` is a primitive name ("string", "boolean", "float64", "uint32", "int32", "bytes",
-    "time", "duration"), a nested `MessageSchema` or an `EnumSchema`.
-    """
-
-    name: str
-    kind: str | MessageSchema | EnumSchema
-    description: str
-    array: bool = False
+    POSE = Topic("/camera/pose", FOXGLOVE_POSE_IN_FRAME)
+    TF = Topic("/tf", FOXGLOVE_FRAME_TRANSFORM)
+    POSE_QUALITY = Topic("/camera/pose_quality", POSE_QUALITY)
+    LANDMARKS = Topic("/landmarks", FOXGLOVE_SCENE_UPDATE)
+    EVENTS = Topic("/events", SESSION_EVENT)
+    IMAGE = Topic("/camera/image", FOXGLOVE_COMPRESSED_IMAGE)
 
 
-@dataclass(frozen=True)
-class MessageSchema:
-    """A Foxglove message: name (without the `foxglove.` prefix), description, fields."""
+class TargetStream(StrEnum):
+    """What a target's channel carries."""
 
-    name: str
-    description: str
-    fields: tuple[Field, ...]
+    BOX = "box"
+    SIGNALS = "signals"
+    RESPONSE = "response"
+    LOCAL_VARIATION = "local_variation"
 
     @property
-    def full_name(self) -> str:
-        """Schema name as recorded in MCAP, e.g. `foxglove.PoseInFrame`."""
-        return f"foxglove.{self.name}"
+    def schema(self) -> str:
+        """Schema name of this stream's messages."""
+        if self is TargetStream.BOX:
+            return FOXGLOVE_IMAGE_ANNOTATIONS
+        if self is TargetStream.SIGNALS:
+            return TARGET_SIGNALS
+        return FOXGLOVE_RAW_IMAGE
 
 
-def _primitive(kind: str) -> dict[str, Any]:
-    if kind == "string":
-        return {"type": "string"}
-    if kind == "boolean":
-        return {"type": "boolean"}
-    if kind == "float64":
-        return {"type": "number"}
-    if kind == "int32":
-        return {"type": "integer"}
-    if kind == "uint32":
-        return {"type": "integer", "minimum": 0}
-    if kind == "bytes":
-        return {"type": "string", "contentEncoding": "base64"}
-    if kind == "time":
-        return {
-            "type": "object",
-            "title": "time",
-            "properties": {
-                "sec": {"type": "integer", "minimum": 0},
-                "nsec": {"type": "integer", "minimum": 0, "maximum": 999_999_999},
-            },
-        }
-    if kind == "duration":
-        return {
-            "type": "object",
-            "title": "duration",
-            "properties": {
-                "sec": {"type": "integer"},
-                "nsec": {"type": "integer", "minimum": 0, "maximum": 999_999_999},
-            },
-        }
-    raise ValueError(f"unknown primitive {kind!r}")
+_TARGETS_PREFIX = "/targets/"
 
 
-TIME_JSON_SCHEMA: dict[str, Any] = _primitive("time")
-"""JSON Schema of a Foxglove timestamp `{"sec", "nsec"}` (for our own schemas)."""
+@dataclass(frozen=True)
+class TargetTopic:
+    """`/targets/<target id>/<stream>`: one stream of one target."""
 
+    target_id: str
+    stream: TargetStream
 
-def json_schema(schema: MessageSchema, *, top_level: bool = True) -> dict[str, Any]:
-    """The JSON Schema of a Foxglove message, laid out as Foxglove's generator lays it out."""
-    properties: dict[str, Any] = {}
-    for field in schema.fields:
-        if isinstance(field.kind, MessageSchema):
-            field_type = json_schema(field.kind, top_level=False)
-        elif isinstance(field.kind, EnumSchema):
-            field_type = {
-                "title": f"foxglove.{field.kind.name}",
-                "description": field.description,
-                "oneOf": [
-                    {"title": name, "const": value, "description": text}
-                    for name, value, text in field.kind.values
-                ],
-            }
-        else:
-            field_type = _primitive(field.kind)
-        if field.array:
-            field_type = {"type": "array", "items": field_type}
-        field_type["description"] = field.description
-        properties[field.name] = field_type
-    rendered: dict[str, Any] = {"title": schema.full_name, "description": schema.description}
-    if top_level:
-        rendered["$comment"] = "Foxglove well-known schema, as generated by foxglove-sdk"
-    rendered["type"] = "object"
-    rendered["properties"] = properties
-    return rendered
+    @property
+    def topic(self) -> Topic:
+        """The channel (name and schema)."""
+        return Topic(f"{_TARGETS_PREFIX}{self.target_id}/{self.stream.value}", self.stream.schema)
 
-
-def schema_bytes(schema: MessageSchema) -> bytes:
-    """The JSON Schema as the bytes of an MCAP Schema record (encoding `jsonschema`)."""
-    return json.dumps(json_schema(schema), separators=(",", ":")).encode("utf-8")
-
-
-# --- the well-known messages we use, with the types they nest ---------------------------------
-
-COLOR = MessageSchema(
-    "Color",
-    "A color in RGBA format",
-    (
-        Field("r", "float64", "Red value between 0 and 1"),
-        Field("g", "float64", "Green value between 0 and 1"),
-        Field("b", "float64", "Blue value between 0 and 1"),
-        Field("a", "float64", "Alpha value between 0 and 1"),
-    ),
-)
-POINT2 = MessageSchema(
-    "Point2",
-    "A point representing a position in 2D space",
-    (
-        Field("x", "float64", "x coordinate position"),
-        Field("y", "float64", "y coordinate position"),
-    ),
-)
-POINT3 = MessageSchema(
-    "Point3",
-    "A point representing a position in 3D space",
-    (
-        Field("x", "float64", "x coordinate position"),
-        Field("y", "float64", "y coordinate position"),
-        Field("z", "float64", "z coordinate position"),
-    ),
-)
-VECTOR3 = MessageSchema(
-    "Vector3",
-    "A vector in 3D space that represents a direction only",
-    (
-        Field("x", "float64", "x component"),
-        Field("y", "float64", "y component"),
-        Field("z", "float64", "z component"),
-    ),
-)
-QUATERNION = MessageSchema(
-    "Quaternion",
-    "A quaternion representing a rotation in 3D space",
-    (
-        Field("x", "float64", "x value"),
-        Field("y", "float64", "y value"),
-        Field("z", "float64", "z value"),
-        Field("w", "float64", "w value"),
-    ),
-)
-POSE = MessageSchema(
-    "Pose",
-    "A position and orientation for an object or reference frame in 3D space",
-    (
-        Field("position", VECTOR3, "Point denoting position in 3D space"),
-        Field("orientation", QUATERNION, "Quaternion denoting orientation in 3D space"),
-    ),
-)
-KEY_VALUE_PAIR = MessageSchema(
-    "KeyValuePair",
-    "A key with its associated value",
-    (Field("key", "string", "Key"), Field("value", "string", "Value")),
-)
-
-CIRCLE_ANNOTATION = MessageSchema(
-    "CircleAnnotation",
-    "A circle annotation on a 2D image",
-    (
-        Field("timestamp", "time", "Timestamp of circle"),
-        Field("position", POINT2, "Center of the circle in 2D image coordinates (pixels)"),
-        Field("diameter", "float64", "Circle diameter in pixels"),
-        Field("thickness", "float64", "Line thickness in pixels"),
-        Field("fill_color", COLOR, "Fill color"),
-        Field("outline_color", COLOR, "Outline color"),
-        Field("metadata", KEY_VALUE_PAIR, "Additional user-provided metadata", array=True),
-    ),
-)
-POINTS_ANNOTATION_TYPE = EnumSchema(
-    "PointsAnnotationType",
-    (
-        ("UNKNOWN", 0, "Unknown points annotation type"),
-        ("POINTS", 1, "Individual points: 0, 1, 2, ..."),
-        ("LINE_LOOP", 2, "Closed polygon: 0-1, 1-2, ..., (n-1)-n, n-0"),
-        ("LINE_STRIP", 3, "Connected line segments: 0-1, 1-2, ..., (n-1)-n"),
-        ("LINE_LIST", 4, "Individual line segments: 0-1, 2-3, 4-5, ..."),
-    ),
-)
-POINTS_ANNOTATION = MessageSchema(
-    "PointsAnnotation",
-    "An array of points on a 2D image",
-    (
-        Field("timestamp", "time", "Timestamp of annotation"),
-        Field("type", POINTS_ANNOTATION_TYPE, "Type of points annotation to draw"),
-        Field("points", POINT2, "Points in 2D image coordinates (pixels)", array=True),
-        Field("outline_color", COLOR, "Outline color"),
-        Field("outline_colors", COLOR, "Per-point or per-segment colors", array=True),
-        Field("fill_color", COLOR, "Fill color"),
-        Field("thickness", "float64", "Stroke thickness in pixels"),
-        Field("metadata", KEY_VALUE_PAIR, "Additional user-provided metadata", array=True),
-    ),
-)
-TEXT_ANNOTATION = MessageSchema(
-    "TextAnnotation",
-    "A text label on a 2D image",
-    (
-        Field("timestamp", "time", "Timestamp of annotation"),
-        Field("position", POINT2, "Bottom-left origin of the text label (pixels)"),
-        Field("text", "string", "Text to display"),
-        Field("font_size", "float64", "Font size in pixels"),
-        Field("text_color", COLOR, "Text color"),
-        Field("background_color", COLOR, "Background fill color"),
-        Field("metadata", KEY_VALUE_PAIR, "Additional user-provided metadata", array=True),
-    ),
-)
-IMAGE_ANNOTATIONS = MessageSchema(
-    "ImageAnnotations",
-    "Array of annotations for a 2D image",
-    (
-        Field("timestamp", "time", "Timestamp of the image annotations"),
-        Field("circles", CIRCLE_ANNOTATION, "Circle annotations", array=True),
-        Field("points", POINTS_ANNOTATION, "Points annotations", array=True),
-        Field("texts", TEXT_ANNOTATION, "Text annotations", array=True),
-        Field("metadata", KEY_VALUE_PAIR, "Additional user-provided metadata", array=True),
-    ),
-)
-
-RAW_IMAGE = MessageSchema(
-    "RawImage",
-    "A raw image",
-    (
-        Field("timestamp", "time", "Timestamp of image"),
-        Field("frame_id", "string", "Frame of reference for the image"),
-        Field("width", "uint32", "Image width in pixels"),
-        Field("height", "uint32", "Image height in pixels"),
-        Field("encoding", "string", "Encoding of the raw image data (e.g. mono8, rgb8)"),
-        Field("step", "uint32", "Byte length of a single row"),
-        Field("data", "bytes", "Raw image data"),
-    ),
-)
-COMPRESSED_IMAGE = MessageSchema(
-    "CompressedImage",
-    "A compressed image",
-    (
-        Field("timestamp", "time", "Timestamp of image"),
-        Field("frame_id", "string", "Frame of reference for the image"),
-        Field("data", "bytes", "Compressed image data"),
-        Field("format", "string", "Image format: jpeg, png, webp or avif"),
-    ),
-)
-POSE_IN_FRAME = MessageSchema(
-    "PoseInFrame",
-    "A timestamped pose for an object or reference frame in 3D space",
-    (
-        Field("timestamp", "time", "Timestamp of pose"),
-        Field("frame_id", "string", "Frame of reference for pose position and orientation"),
-        Field("pose", POSE, "Pose in 3D space"),
-    ),
-)
-FRAME_TRANSFORM = MessageSchema(
-    "FrameTransform",
-    "A transform between two reference frames in 3D space: the pose of the child frame in the "
-    "parent frame",
-    (
-        Field("timestamp", "time", "Timestamp of transform"),
-        Field("parent_frame_id", "string", "Name of the parent frame"),
-        Field("child_frame_id", "string", "Name of the child frame"),
-        Field("translation", VECTOR3, "Position of the child frame's origin in the parent frame"),
-        Field("rotation", QUATERNION, "Orientation of the child frame in the parent frame"),
-    ),
-)
-
-SCENE_ENTITY_DELETION_TYPE = EnumSchema(
-    "SceneEntityDeletionType",
-    (
-        ("MATCHING_ID", 0, "Delete the existing entity on the same topic that has the provided id"),
-        ("ALL", 1, "Delete all existing entities on the same topic"),
-    ),
-)
-SCENE_ENTITY_DELETION = MessageSchema(
-    "SceneEntityDeletion",
-    "Command to remove previously published entities",
-    (
-        Field("timestamp", "time", "Only matching entities earlier than this are deleted"),
-        Field("type", SCENE_ENTITY_DELETION_TYPE, "Type of deletion action to perform"),
-        Field("id", "string", "Identifier which must match if type is MATCHING_ID"),
-    ),
-)
-ARROW_PRIMITIVE = MessageSchema(
-    "ArrowPrimitive",
-    "A primitive representing an arrow",
-    (
-        Field("pose", POSE, "Position of the arrow's tail and orientation of the arrow"),
-        Field("shaft_length", "float64", "Length of the arrow shaft"),
-        Field("shaft_diameter", "float64", "Diameter of the arrow shaft"),
-        Field("head_length", "float64", "Length of the arrow head"),
-        Field("head_diameter", "float64", "Diameter of the arrow head"),
-        Field("color", COLOR, "Color of the arrow"),
-    ),
-)
-CUBE_PRIMITIVE = MessageSchema(
-    "CubePrimitive",
-    "A primitive representing a cube or rectangular prism",
-    (
-        Field("pose", POSE, "Position of the center of the cube and orientation of the cube"),
-        Field("size", VECTOR3, "Size of the cube along each axis"),
-        Field("color", COLOR, "Color of the cube"),
-    ),
-)
-SPHERE_PRIMITIVE = MessageSchema(
-    "SpherePrimitive",
-    "A primitive representing a sphere or ellipsoid",
-    (
-        Field("pose", POSE, "Position of the center of the sphere and orientation of the sphere"),
-        Field("size", VECTOR3, "Size (diameter) of the sphere along each axis"),
-        Field("color", COLOR, "Color of the sphere"),
-    ),
-)
-CYLINDER_PRIMITIVE = MessageSchema(
-    "CylinderPrimitive",
-    "A primitive representing a cylinder, elliptic cylinder, or truncated cone",
-    (
-        Field("pose", POSE, "Position of the center of the cylinder and its orientation"),
-        Field("size", VECTOR3, "Size of the cylinder's bounding box"),
-        Field("bottom_scale", "float64", "0-1, ratio of the bottom face diameter to the box"),
-        Field("top_scale", "float64", "0-1, ratio of the top face diameter to the box"),
-        Field("color", COLOR, "Color of the cylinder"),
-    ),
-)
-LINE_TYPE = EnumSchema(
-    "LineType",
-    (
-        ("LINE_STRIP", 0, "Connected line segments: 0-1, 1-2, ..., (n-1)-n"),
-        ("LINE_LOOP", 1, "Closed polygon: 0-1, 1-2, ..., (n-1)-n, n-0"),
-        ("LINE_LIST", 2, "Individual line segments: 0-1, 2-3, 4-5, ..."),
-    ),
-)
-LINE_PRIMITIVE = MessageSchema(
-    "LinePrimitive",
-    "A primitive representing a series of points connected by lines",
-    (
-        Field("type", LINE_TYPE, "Drawing primitive to use for lines"),
-        Field("pose", POSE, "Origin of lines relative to reference frame"),
-        Field("thickness", "float64", "Line thickness"),
-        Field("scale_invariant", "boolean", "Whether thickness is in screen pixels"),
-        Field("points", POINT3, "Points along the line", array=True),
-        Field("color", COLOR, "Solid color to use for the whole line"),
-        Field("colors", COLOR, "Per-point colors", array=True),
-        Field("indices", "uint32", "Indices into the points and colors arrays", array=True),
-    ),
-)
-TEXT_PRIMITIVE = MessageSchema(
-    "TextPrimitive",
-    "A primitive representing a text label",
-    (
-        Field("pose", POSE, "Position of the center of the text box and orientation of the text"),
-        Field("billboard", "boolean", "Whether the text always faces the camera"),
-        Field("font_size", "float64", "Font size (height of one line of text)"),
-        Field("scale_invariant", "boolean", "Whether font_size is in screen pixels"),
-        Field("color", COLOR, "Color of the text"),
-        Field("text", "string", "Text"),
-    ),
-)
-TRIANGLE_LIST_PRIMITIVE = MessageSchema(
-    "TriangleListPrimitive",
-    "A primitive representing a set of triangles or a surface tiled by triangles",
-    (
-        Field("pose", POSE, "Origin of triangles relative to reference frame"),
-        Field("points", POINT3, "Vertices, read as triples", array=True),
-        Field("color", COLOR, "Solid color to use for the whole shape"),
-        Field("colors", COLOR, "Per-vertex colors", array=True),
-        Field("indices", "uint32", "Indices into the points and colors arrays", array=True),
-    ),
-)
-MODEL_PRIMITIVE = MessageSchema(
-    "ModelPrimitive",
-    "A primitive representing a 3D model file loaded from an external URL or embedded data",
-    (
-        Field("pose", POSE, "Origin of model relative to reference frame"),
-        Field("scale", VECTOR3, "Scale factor to apply to the model along each axis"),
-        Field("color", COLOR, "Solid color used if override_color is true"),
-        Field("override_color", "boolean", "Whether to use color instead of embedded materials"),
-        Field("url", "string", "URL pointing to model file"),
-        Field("media_type", "string", "Media type of embedded model"),
-        Field("data", "bytes", "Embedded model"),
-    ),
-)
-SCENE_ENTITY = MessageSchema(
-    "SceneEntity",
-    "A visual element in a 3D scene, made of primitives sharing one frame of reference",
-    (
-        Field("timestamp", "time", "Timestamp of the entity"),
-        Field("frame_id", "string", "Frame of reference"),
-        Field("id", "string", "Identifier; replaces any prior entity with the same id"),
-        Field("lifetime", "duration", "Time after which the entity is removed; zero: never"),
-        Field("frame_locked", "boolean", "Whether the entity follows frame_id as it moves"),
-        Field("metadata", KEY_VALUE_PAIR, "Additional user-provided metadata", array=True),
-        Field("arrows", ARROW_PRIMITIVE, "Arrow primitives", array=True),
-        Field("cubes", CUBE_PRIMITIVE, "Cube primitives", array=True),
-        Field("spheres", SPHERE_PRIMITIVE, "Sphere primitives", array=True),
-        Field("cylinders", CYLINDER_PRIMITIVE, "Cylinder primitives", array=True),
-        Field("lines", LINE_PRIMITIVE, "Line primitives", array=True),
-        Field("triangles", TRIANGLE_LIST_PRIMITIVE, "Triangle list primitives", array=True),
-        Field("texts", TEXT_PRIMITIVE, "Text primitives", array=True),
-        Field("models", MODEL_PRIMITIVE, "Model primitives", array=True),
-    ),
-)
-SCENE_UPDATE = MessageSchema(
-    "SceneUpdate",
-    "An update to the entities displayed in a 3D scene",
-    (
-        Field("deletions", SCENE_ENTITY_DELETION, "Scene entities to delete", array=True),
-        Field("entities", SCENE_ENTITY, "Scene entities to add or replace", array=True),
-    ),
-)
-
-# --- message builders -------------------------------------------------------------------------
-
-Rgba = tuple[float, float, float, float]
-
-
-def timestamp(nanoseconds: int) -> dict[str, int]:
-    """A Foxglove time `{"sec", "nsec"}` from integer nanoseconds."""
-    sec, nsec = divmod(int(nanoseconds), 1_000_000_000)
-    return {"sec": sec, "nsec": nsec}
-
-
-def color(rgba: Rgba) -> dict[str, float]:
-    """A Foxglove Color from (r, g, b, a) in [0, 1]."""
-    r, g, b, a = rgba
-    return {"r": float(r), "g": float(g), "b": float(b), "a": float(a)}
-
-
-def box_annotations(
-    time_ns: int, box: Sequence[float], label: str, outline: Rgba, *, thickness: float = 2.0
-) -> dict[str, Any]:
-    """ImageAnnotations drawing one (x, y, w, h) box as a closed polygon with a text label.
-
-    Foxglove's image coordinates put (0, 0) at the top-left corner of the top-left pixel, the same
-    origin as our 0-based boxes.
-    """
-    x, y, w, h = (float(v) for v in box)
-    stamp = timestamp(time_ns)
-    corners = [(x, y), (x + w, y), (x + w, y + h), (x, y + h)]
-    return {
-        "circles": [],
-        "points": [
-            {
-                "timestamp": stamp,
-                "type": 2,  # LINE_LOOP
-                "points": [{"x": px, "y": py} for px, py in corners],
-                "outline_color": color(outline),
-                "outline_colors": [],
-                "fill_color": color((0.0, 0.0, 0.0, 0.0)),
-                "thickness": thickness,
-            }
-        ],
-        "texts": [
-            {
-                "timestamp": stamp,
-                "position": {"x": x, "y": max(y - 4.0, 0.0)},
-                "text": label,
-                "font_size": 14.0,
-                "text_color": color(outline),
-                "background_color": color((0.0, 0.0, 0.0, 0.6)),
-            }
-        ],
-    }
-
-
-def raw_image_mono8(time_ns: int, frame_id: str, pixels: np.ndarray) -> dict[str, Any]:
-    """RawImage of a 2-D uint8 array, encoding `mono8`."""
-    pixels = np.ascontiguousarray(pixels, dtype=np.uint8)
-    height, width = pixels.shape
-    return {
-        "timestamp": timestamp(time_ns),
-        "frame_id": frame_id,
-        "width": int(width),
-        "height": int(height),
-        "encoding": "mono8",
-        "step": int(width),
-        "data": base64.b64encode(pixels.tobytes()).decode("ascii"),
-    }
-
-
-def compressed_image(time_ns: int, frame_id: str, data: bytes, image_format: str) -> dict[str, Any]:
-    """CompressedImage holding encoded bytes (`jpeg`, `png`, ...)."""
-    return {
-        "timestamp": timestamp(time_ns),
-        "frame_id": frame_id,
-        "data": base64.b64encode(data).decode("ascii"),
-        "format": image_format,
-    }
-
-
-def _pose(position: Sequence[float], quaternion_xyzw: Sequence[float]) -> dict[str, Any]:
-    px, py, pz = (float(v) for v in position)
-    qx, qy, qz, qw = (float(v) for v in quaternion_xyzw)
-    return {
-        "position": {"x": px, "y": py, "z": pz},
-        "orientation": {"x": qx, "y": qy, "z": qz, "w": qw},
-    }
-
-
-def pose_in_frame(
-    time_ns: int, frame_id: str, position: Sequence[float], quaternion_xyzw: Sequence[float]
-) -> dict[str, Any]:
-    """PoseInFrame: a pose (position, orientation as x, y, z, w) in `frame_id`."""
-    return {
-        "timestamp": timestamp(time_ns),
-        "frame_id": frame_id,
-        "pose": _pose(position, quaternion_xyzw),
-    }
-
-
-def frame_transform(
-    time_ns: int,
-    parent_frame_id: str,
-    child_frame_id: str,
-    translation: Sequence[float],
-    rotation_xyzw: Sequence[float],
-) -> dict[str, Any]:
-    """FrameTransform: the child frame's pose in the parent frame."""
-    pose = _pose(translation, rotation_xyzw)
-    return {
-        "timestamp": timestamp(time_ns),
-        "parent_frame_id": parent_frame_id,
-        "child_frame_id": child_frame_id,
-        "translation": pose["position"],
-        "rotation": pose["orientation"],
-    }
-
-
-def landmark_scene_update(
-    time_ns: int,
-    frame_id: str,
-    landmarks: Iterable[tuple[str, Sequence[float]]],
-    marker_size: float,
-    rgba: Rgba = (1.0, 0.6, 0.0, 1.0),
-) -> dict[str, Any]:
-    """SceneUpdate with one entity per landmark: a sphere of diameter `marker_size` and its id."""
-    stamp = timestamp(time_ns)
-    identity = (0.0, 0.0, 0.0, 1.0)
-    entities = []
-    for landmark_id, position in landmarks:
-        px, py, pz = (float(v) for v in position)
-        label_position = (px, py, pz + marker_size)
-        entities.append(
-            {
-                "timestamp": stamp,
-                "frame_id": frame_id,
-                "id": str(landmark_id),
-                "lifetime": {"sec": 0, "nsec": 0},
-                "frame_locked": False,
-                "metadata": [],
-                "arrows": [],
-                "cubes": [],
-                "spheres": [
-                    {
-                        "pose": _pose((px, py, pz), identity),
-                        "size": {"x": marker_size, "y": marker_size, "z": marker_size},
-                        "color": color(rgba),
-                    }
-                ],
-                "cylinders": [],
-                "lines": [],
-                "triangles": [],
-                "texts": [
-                    {
-                        "pose": _pose(label_position, identity),
-                        "billboard": True,
-                        "font_size": 14.0,
-                        "scale_invariant": True,
-                        "color": color((1.0, 1.0, 1.0, 1.0)),
-                        "text": str(landmark_id),
-                    }
-                ],
-                "models": [],
-            }
-        )
-    return {"deletions": [], "entities": entities}
+    @classmethod
+    def parse(cls, name: str) -> TargetTopic | None:
+        """The target stream a channel name denotes, or None for another channel."""
+        if not name.startswith(_TARGETS_PREFIX):
+            return None
+        target_id, _, stream = name[len(_TARGETS_PREFIX) :].partition("/")
+        if not target_id or stream not in TargetStream.__members__.values():
+            return None
+        return cls(target_id, TargetStream(stream))
