@@ -2,11 +2,18 @@
 
 from __future__ import annotations
 
+from collections.abc import Callable
+
 import numpy as np
 import scipy.linalg
 
+from autotrack.tracker.dcf import half_spectrum_weights
+
 # The release scales the global variation by 1e-4 before comparing it with phi and using nu.
 GLOBAL_VARIATION_SCALE = 1e-4
+
+ThetaRule = Callable[[np.ndarray, int], float]
+"""theta for the next ADMM iteration from the current filter (half spectrum) and the iteration."""
 
 
 def target_region(grid_size: tuple[int, int], region_size: tuple[int, int]) -> tuple[slice, slice]:
@@ -96,3 +103,36 @@ def adaptive_spatial_window(
     outside = float(base_window.max())
     window[region] = np.where(np.isfinite(region_values), region_values, outside)
     return window
+
+
+def theta_update(
+    variant: str, theta_ref: float, filter_prev: np.ndarray, grid_size: tuple[int, int]
+) -> ThetaRule:
+    """Eq. 13 re-estimation of theta inside ADMM: theta = max(theta_ref - ||g - g_prev||^2 / 2, 0).
+
+    `variant` "paper" takes the full filter-difference energy (on the half spectrum, weighted
+    to count the whole one); "release" indexes one element of the difference as the authors'
+    code does (MATLAB linear index = channel count); "reference" keeps theta = theta_ref.
+    `filter_prev` is the previous frame's filter, (channels, rows, half columns).
+    """
+    if variant == "reference":
+        return lambda g_f, iteration: theta_ref
+    if variant == "release":
+        channels = filter_prev.shape[0]
+        shape = (grid_size[0], grid_size[1], channels)
+        row, col, channel = np.unravel_index(channels - 1, shape, order="F")
+
+        def release(g_f: np.ndarray, iteration: int) -> float:
+            change = abs(complex(g_f[channel, row, col] - filter_prev[channel, row, col]))
+            return max(theta_ref - change**2 / 2.0, 0.0)
+
+        return release
+    weights = half_spectrum_weights(grid_size)
+
+    def paper(g_f: np.ndarray, iteration: int) -> float:
+        difference = g_f - filter_prev
+        energy = float(np.sum((difference.real**2 + difference.imag**2) * weights))
+        energy /= grid_size[0] * grid_size[1]
+        return max(theta_ref - energy / 2.0, 0.0)
+
+    return paper

@@ -248,35 +248,16 @@ class AutoTrack:
         np.multiply(features.transpose(2, 0, 1), self.cos_window, out=windowed)
         return self.transform.forward(windowed)
 
-    def _theta_update(self, theta_ref: float, filter_prev: np.ndarray):
-        """Eq. 13 re-estimation of theta inside ADMM, in the variant chosen by the parameters."""
+    def _theta_update(
+        self, theta_ref: float, filter_prev: np.ndarray
+    ) -> regularization.ThetaRule | None:
+        """Eq. 13 inside ADMM (regularization.theta_update), in the parameters' variant; None
+        keeps theta at its start value (0, zeta, or STRCF's fixed theta). Like every variant it
+        is not re-estimated after the last iteration (train_filter stops there)."""
         p = self.params
         if not p.adaptive_temporal or self.frame_number <= 2:
-            return None  # theta stays at its start value (0, zeta, or STRCF's fixed theta)
-        if p.theta_update == "reference":
-            return lambda g_f, iteration: theta_ref
-        if p.theta_update == "release":
-            # The release indexes one element (MATLAB linear index = channel count) of the
-            # filter difference; like every variant here it is not re-estimated after the last
-            # iteration (train_filter stops there).
-            channels = filter_prev.shape[0]
-            shape = (self.grid_size[0], self.grid_size[1], channels)
-            row, col, channel = np.unravel_index(channels - 1, shape, order="F")
-
-            def release(g_f: np.ndarray, iteration: int) -> float:
-                change = abs(complex(g_f[channel, row, col] - filter_prev[channel, row, col]))
-                return max(theta_ref - change**2 / 2.0, 0.0)
-
-            return release
-        weights = dcf.half_spectrum_weights(self.grid_size)
-
-        def paper(g_f: np.ndarray, iteration: int) -> float:
-            difference = g_f - filter_prev
-            energy = float(np.sum((difference.real**2 + difference.imag**2) * weights))
-            energy /= self.grid_size[0] * self.grid_size[1]
-            return max(theta_ref - energy / 2.0, 0.0)
-
-        return paper
+            return None
+        return regularization.theta_update(p.theta_update, theta_ref, filter_prev, self.grid_size)
 
     def _train(
         self, xf: np.ndarray, theta_start: float, theta_ref: float
