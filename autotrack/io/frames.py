@@ -240,3 +240,27 @@ def open_frames(path: str | Path) -> FrameSource:
     if path.suffix.lower() in IMAGE_EXTENSIONS:
         return ImageSequence([path], path.stem)
     return VideoFrames(path)
+
+
+class FrameCache:
+    """The last few frames read from a FrameSource, for stepping back and forth without
+    decoding again."""
+
+    def __init__(self, frames: FrameSource, size: int) -> None:
+        self.frames = frames
+        self.size = size
+        self._cached: OrderedDict[int, np.ndarray] = OrderedDict()
+
+    def read(self, index: int) -> np.ndarray:
+        """Frame `index` (RGB uint8); InputError outside the sequence."""
+        if not 0 <= index < len(self.frames):
+            raise InputError(f"frame {index} is outside 0..{len(self.frames) - 1}")
+        cached = self._cached.get(index)
+        if cached is not None:
+            self._cached.move_to_end(index)
+            return cached
+        image = self.frames.read(index)
+        self._cached[index] = image
+        if len(self._cached) > self.size:
+            self._cached.popitem(last=False)
+        return image

@@ -14,6 +14,8 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
+from autotrack.errors import InputError
+
 
 @dataclass(frozen=True)
 class CameraIntrinsics:
@@ -43,6 +45,14 @@ class CameraIntrinsics:
     def distortion_array(self) -> np.ndarray:
         """Distortion coefficients as a float64 array (length 0 when there is no distortion)."""
         return np.asarray(self.distortion, dtype=np.float64)
+
+    def check_image_size(self, width: int, height: int) -> None:
+        """InputError unless this camera is calibrated for `width` x `height` images."""
+        if (width, height) != (self.width, self.height):
+            raise InputError(
+                f"frames are {width}x{height} but the scene's camera is calibrated for "
+                f"{self.width}x{self.height}: use intrinsics for this image size"
+            )
 
     def scaled(self, factor: float) -> CameraIntrinsics:
         """The same camera for images resized by `factor` (distortion is scale-free)."""

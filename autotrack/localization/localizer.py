@@ -315,27 +315,7 @@ class Localizer:
                 f"ill-conditioned geometry (position uncertainty {std * 100:.0f} cm > "
                 f"{params.max_position_std_m * 100:.0f} cm)"
             )
-        if prior is not None:
-            age = frame_index - prior.frame_index
-            per_frame = (
-                params.three_point_translation_per_frame_m
-                if len(fit.ids) == 3
-                else params.max_translation_per_frame_m
-            )
-            jump = float(np.linalg.norm(position - prior.position))
-            turn = rotation_angle_deg(prior.rotation, rotation)
-            if jump > per_frame * max(age, 1):
-                reasons.append(
-                    f"jump of {jump:.2f} m from the pose of frame {prior.frame_index} "
-                    f"(limit {per_frame:g} m per frame)"
-                )
-            if turn > params.max_rotation_per_frame_deg * max(age, 1):
-                reasons.append(
-                    f"turn of {turn:.0f} deg from the pose of frame {prior.frame_index} "
-                    f"(limit {params.max_rotation_per_frame_deg:g} deg per frame)"
-                )
-        elif len(fit.ids) == 3:
-            reasons.append("three-landmark pose without a recent pose to check it against")
+        reasons += self._continuity_problems(frame_index, fit, rotation, position, prior)
         if reasons:
             return PoseEstimate(
                 frame_index=frame_index,
@@ -362,6 +342,41 @@ class Localizer:
             position_std_m=std,
             excluded_landmarks=excluded,
         )
+
+    def _continuity_problems(
+        self,
+        frame_index: int,
+        fit: Fit,
+        rotation: np.ndarray,
+        position: np.ndarray,
+        prior: _Prior | None,
+    ) -> list[str]:
+        """Why a pose is implausibly far from the previous trusted one (empty: it is not)."""
+        params = self.params
+        if prior is None:
+            if len(fit.ids) == 3:
+                return ["three-landmark pose without a recent pose to check it against"]
+            return []
+        reasons = []
+        age = frame_index - prior.frame_index
+        per_frame = (
+            params.three_point_translation_per_frame_m
+            if len(fit.ids) == 3
+            else params.max_translation_per_frame_m
+        )
+        jump = float(np.linalg.norm(position - prior.position))
+        turn = rotation_angle_deg(prior.rotation, rotation)
+        if jump > per_frame * max(age, 1):
+            reasons.append(
+                f"jump of {jump:.2f} m from the pose of frame {prior.frame_index} "
+                f"(limit {per_frame:g} m per frame)"
+            )
+        if turn > params.max_rotation_per_frame_deg * max(age, 1):
+            reasons.append(
+                f"turn of {turn:.0f} deg from the pose of frame {prior.frame_index} "
+                f"(limit {params.max_rotation_per_frame_deg:g} deg per frame)"
+            )
+        return reasons
 
     def _current_prior(self, frame_index: int) -> _Prior | None:
         prior = self._prior

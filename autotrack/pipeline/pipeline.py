@@ -13,7 +13,6 @@ frame re-tracks only that target from there; the other targets keep their result
 from __future__ import annotations
 
 import time
-from collections import OrderedDict
 from collections.abc import Callable, Iterator, Mapping
 from pathlib import Path
 from types import EllipsisType
@@ -22,7 +21,7 @@ from typing import Any
 import numpy as np
 
 from autotrack.errors import InputError
-from autotrack.io.frames import FrameSource
+from autotrack.io.frames import FrameCache, FrameSource
 from autotrack.localization.localizer import Localizer, LocalizerParams
 from autotrack.localization.scene import Scene
 from autotrack.params import TrackerParams
@@ -66,7 +65,7 @@ class Pipeline:
         if tracker_threads < 1:
             raise InputError(f"tracker threads must be at least 1, got {tracker_threads}")
         if scene is not None:
-            _check_frame_size(frames, scene)
+            scene.camera.check_image_size(*frames.frame_size)
         self.frames = frames
         self.params = params
         self.scene = scene
@@ -86,8 +85,9 @@ class Pipeline:
         )
         self._last_pose_frame = -1
         self._next_number = 1
-        self._frame_cache: OrderedDict[int, np.ndarray] = OrderedDict()
+        self._frame_cache = FrameCache(frames, FRAME_CACHE)
         self._recorder: SessionRecorder | None = None
+        self._embedded: set[int] = set()
 
     @classmethod
     def resume(
@@ -125,17 +125,7 @@ class Pipeline:
 
     def frame(self, index: int) -> np.ndarray:
         """Frame `index` (RGB uint8), from a small cache."""
-        if not 0 <= index < self.frame_count:
-            raise InputError(f"frame {index} is outside 0..{self.frame_count - 1}")
-        cached = self._frame_cache.get(index)
-        if cached is not None:
-            self._frame_cache.move_to_end(index)
-            return cached
-        image = self.frames.read(index)
-        self._frame_cache[index] = image
-        if len(self._frame_cache) > FRAME_CACHE:
-            self._frame_cache.popitem(last=False)
-        return image
+        return self._frame_cache.read(index)
 
     # -- recording ----------------------------------------------------------------------------
 
@@ -162,6 +152,16 @@ class Pipeline:
             if self.scene is not None:
                 self._recorder.log_landmarks(self.scene)
         return self._recorder
+
+    def _embed_frame(self, frame_index: int) -> None:
+        """The frame itself into the recording, once, when the recording embeds frames."""
+        recorder = self._recorder_or_none()
+        if (
+            recorder is not None
+            and frame_index not in self._embedded
+            and recorder.log_frame(frame_index, self.frame(frame_index))
+        ):
+            self._embedded.add(frame_index)
 
     def _log_event(self, kind: str, frame_index: int, target_id: str | None, **extra: Any) -> None:
         recorder = self._recorder_or_none()
@@ -222,6 +222,7 @@ class Pipeline:
             for k, (box, _) in enumerate(entries)
         }
         results = self._timed_start(frame_index, boxes)
+        self._embed_frame(frame_index)
         for target_id, (_, landmark) in zip(boxes, entries, strict=True):
             self.targets[target_id] = TrackedTarget(
                 id=target_id,
@@ -321,6 +322,7 @@ class Pipeline:
         results, seconds = self._groups.advance(frame_index, self.frame)
         if results:
             self.frame_seconds[frame_index] = seconds
+            self._embed_frame(frame_index)
             for target_id, result in results.items():
                 self._store(self.targets[target_id], result)
         self._estimate_pose(frame_index)
@@ -488,16 +490,6 @@ class Pipeline:
             pose = self.poses[index]
             if pose.valid:
                 yield index, np.asarray(pose.position, dtype=np.float64)
-
-
-def _check_frame_size(frames: FrameSource, scene: Scene) -> None:
-    width, height = frames.frame_size
-    camera = scene.camera
-    if (width, height) != (camera.width, camera.height):
-        raise InputError(
-            f"frames are {width}x{height} but the scene's camera is calibrated for "
-            f"{camera.width}x{camera.height}: use intrinsics for this image size"
-        )
 
 
 def _number_of(target_id: str, fallback: int) -> int:

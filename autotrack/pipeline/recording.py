@@ -24,6 +24,10 @@ class Recording:
     """Name part of the file in `directory` (default: the frames' name)."""
     scene_path: Path | None = None
     """The scene file, recorded in the metadata and attached."""
+    record_maps: bool = True
+    """Record each target's response and local-variation maps (mono8)."""
+    embed_frames: bool = False
+    """Record every tracked frame as JPEG too (large)."""
 
 
 def open_recorder(
@@ -40,6 +44,8 @@ def open_recorder(
         "scene_path": recording.scene_path,
         "fps": fps,
         "resumed_from": resumed_from,
+        "record_maps": recording.record_maps,
+        "embed_frames": recording.embed_frames,
     }
     if recording.path is not None:
         return SessionRecorder(recording.path, **options)

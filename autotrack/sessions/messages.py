@@ -316,3 +316,22 @@ def pose_messages(time_ns: int, pose: PoseLike) -> list[Message]:
         transform = frame_transform(time_ns, WORLD_FRAME, CAMERA_FRAME, position, quaternion)
         batch.append((Topics.TF, transform))
     return batch
+
+
+def landmark_positions(scene: Any) -> list[tuple[str, np.ndarray]]:
+    """(id, position) pairs from a Scene, a mapping id -> position, or objects with .id/.position."""
+    landmarks = getattr(scene, "landmarks", scene)
+    if isinstance(landmarks, Mapping):
+        items: Iterable[tuple[Any, Any]] = landmarks.items()
+    else:
+        items = (
+            (getattr(item, "id", getattr(item, "landmark_id", None)), item.position)
+            for item in landmarks
+        )
+    result = []
+    for landmark_id, position in items:
+        point = np.asarray(position, dtype=np.float64).reshape(-1)
+        if landmark_id is None or point.shape != (3,) or not np.isfinite(point).all():
+            raise SessionError(f"landmark {landmark_id!r} needs an id and a finite 3-D position")
+        result.append((str(landmark_id), point))
+    return result

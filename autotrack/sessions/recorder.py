@@ -13,20 +13,17 @@ last `flush_interval` (1 s) of records; `open_session` reads everything before t
 
 from __future__ import annotations
 
-import dataclasses
-import json
 import math
 import os
 import re
 import threading
 import time
-from collections.abc import Iterable, Mapping, Sequence
+from collections.abc import Mapping, Sequence
 from datetime import UTC, datetime
 from pathlib import Path
 from types import TracebackType
 from typing import Any, BinaryIO
 
-import mcap
 import numpy as np
 from mcap.writer import CompressionType, Writer
 
@@ -37,12 +34,11 @@ from autotrack.result import PoseEstimate, TrackResult
 from autotrack.sessions import messages
 from autotrack.sessions.encoding import (
     DEFAULT_FPS,
-    FORMAT_VERSION,
     SESSION_METADATA_NAME,
     encode_json,
     frame_time_ns,
-    jsonable,
 )
+from autotrack.sessions.metadata import params_dict, session_metadata
 from autotrack.sessions.schemas import (
     CAMERA_FRAME,
     MESSAGE_ENCODING,
@@ -80,38 +76,9 @@ def _check_target_id(target_id: str) -> str:
     return target_id
 
 
-def _params_dict(tracker_params: TrackerParams | Mapping[str, Any]) -> dict[str, Any]:
-    if isinstance(tracker_params, TrackerParams):
-        return jsonable(dataclasses.asdict(tracker_params))
-    if isinstance(tracker_params, Mapping):
-        return jsonable(dict(tracker_params))
-    raise SessionError(
-        f"tracker_params must be TrackerParams or a dict, got {type(tracker_params).__name__}"
-    )
-
-
 def _safe_name(name: str) -> str:
     cleaned = re.sub(r"[^A-Za-z0-9_.-]+", "_", name).strip("._-")
     return cleaned[:80] or "session"
-
-
-def _landmark_positions(scene: Any) -> list[tuple[str, np.ndarray]]:
-    """(id, position) pairs from a Scene, a mapping id -> position, or objects with .id/.position."""
-    landmarks = getattr(scene, "landmarks", scene)
-    if isinstance(landmarks, Mapping):
-        items: Iterable[tuple[Any, Any]] = landmarks.items()
-    else:
-        items = (
-            (getattr(item, "id", getattr(item, "landmark_id", None)), item.position)
-            for item in landmarks
-        )
-    result = []
-    for landmark_id, position in items:
-        point = np.asarray(position, dtype=np.float64).reshape(-1)
-        if landmark_id is None or point.shape != (3,) or not np.isfinite(point).all():
-            raise SessionError(f"landmark {landmark_id!r} needs an id and a finite 3-D position")
-        result.append((str(landmark_id), point))
-    return result
 
 
 # --- recording --------------------------------------------------------------------------------
@@ -165,7 +132,7 @@ class SessionRecorder:
         self.jpeg_quality = int(jpeg_quality)
         self.flush_interval = float(flush_interval)
         self._fsync = bool(fsync)
-        params = _params_dict(tracker_params)
+        params = params_dict(tracker_params)
         scene_bytes = None if scene_path is None else _read_scene(scene_path)
         self._file: BinaryIO = _create_file(self.path)
         self._lock = threading.Lock()
@@ -181,7 +148,7 @@ class SessionRecorder:
         self._saved_frame_index: int | None = None
         self._flush_error: BaseException | None = None
         self._closed = False
-        self.metadata = _metadata(
+        self.metadata = session_metadata(
             source=source,
             fps=self.fps,
             fps_given=fps is not None,
@@ -192,18 +159,7 @@ class SessionRecorder:
             flush_interval=self.flush_interval,
             resumed_from=resumed_from,
         )
-        try:
-            self._writer.start(profile="", library=f"autotrack-studio {autotrack.__version__}")
-            self._writer.add_metadata(SESSION_METADATA_NAME, self.metadata)
-            if scene_bytes is not None:
-                now = time.time_ns()
-                self._writer.add_attachment(
-                    now, 0, Path(scene_path).name, "application/octet-stream", scene_bytes
-                )
-            self._writer.flush()
-        except OSError as error:
-            self._file.close()
-            raise SessionError(f"cannot write session file {self.path}: {error}") from error
+        self._start(None if scene_path is None else Path(scene_path).name, scene_bytes)
         self._stop = threading.Event()
         self._flusher = threading.Thread(
             target=self._flush_loop, name=f"session-flush-{self.path.name}", daemon=True
@@ -375,7 +331,7 @@ class SessionRecorder:
         id -> (x, y, z), or an iterable of objects with `id` and `position`. Spheres are
         `marker_size` across (default 2% of the landmarks' extent).
         """
-        landmarks = _landmark_positions(scene)
+        landmarks = messages.landmark_positions(scene)
         if marker_size is None:
             points = np.array([p for _, p in landmarks]) if landmarks else np.zeros((1, 3))
             extent = float(np.linalg.norm(points.max(axis=0) - points.min(axis=0)))
@@ -420,6 +376,21 @@ class SessionRecorder:
         self.close()
 
     # -- internals -----------------------------------------------------------------------------
+
+    def _start(self, scene_name: str | None, scene_bytes: bytes | None) -> None:
+        """Header, metadata record and the scene attachment, handed to the OS at once."""
+        try:
+            self._writer.start(profile="", library=f"autotrack-studio {autotrack.__version__}")
+            self._writer.add_metadata(SESSION_METADATA_NAME, self.metadata)
+            if scene_bytes is not None:
+                now = time.time_ns()
+                self._writer.add_attachment(
+                    now, 0, scene_name, "application/octet-stream", scene_bytes
+                )
+            self._writer.flush()
+        except OSError as error:
+            self._file.close()
+            raise SessionError(f"cannot write session file {self.path}: {error}") from error
 
     def _raise_if_unusable(self) -> None:
         if self._closed:
@@ -525,35 +496,3 @@ def _create_file(path: Path) -> BinaryIO:
         ) from error
     except OSError as error:
         raise SessionError(f"cannot create session file {path}: {error}") from error
-
-
-def _metadata(
-    *,
-    source: str,
-    fps: float,
-    fps_given: bool,
-    params: dict[str, Any],
-    scene_path: str | Path | None,
-    embed_frames: bool,
-    record_maps: bool,
-    flush_interval: float,
-    resumed_from: str | Path | None,
-) -> dict[str, str]:
-    """The session metadata record (every value a string, as MCAP metadata requires)."""
-    return {
-        "format_version": str(FORMAT_VERSION),
-        "package_version": autotrack.__version__,
-        "mcap_version": getattr(mcap, "__version__", "unknown"),
-        "created_utc": datetime.now(UTC).isoformat(timespec="seconds"),
-        "source": str(source),
-        "fps": repr(fps),
-        "fps_given": "true" if fps_given else "false",
-        "tracker_params": json.dumps(params, sort_keys=True),
-        "scene_path": str(scene_path) if scene_path is not None else "",
-        "embed_frames": "true" if embed_frames else "false",
-        "record_maps": "true" if record_maps else "false",
-        "map_encoding": "mono8, min-max per map: value = lo + q / 255 * (hi - lo), "
-        "[lo, hi] in the target's signals message",
-        "flush_interval_s": repr(flush_interval),
-        "resumed_from": str(resumed_from) if resumed_from is not None else "",
-    }

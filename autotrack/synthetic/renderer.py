@@ -30,7 +30,7 @@ from scipy.spatial.transform import Rotation
 from autotrack.errors import InputError
 from autotrack.io.tum import write_tum
 from autotrack.localization.camera import CameraIntrinsics, project_points
-from autotrack.localization.scene import save_scene
+from autotrack.localization.scene import Scene, save_scene
 from autotrack.synthetic.trajectories import (
     SequenceSpec,
     frame_conditions,
@@ -287,6 +287,43 @@ def render_sequence(
             f"trajectory {spec.trajectory!r} with {spec.frames} frames loses a landmark: "
             f"{problems[0]} ({len(problems)} problem(s))"
         )
+    _write_ground_truth(out, spec, scene, boxes, (timestamps, rotations, positions))
+
+    renderer = Renderer(camera, spec.seed, settings.noise_sigma)
+    conditions = frame_conditions(spec)
+    trajectory = spec.camera_path()
+    rng = np.random.default_rng(spec.seed + 15485863)
+    for index in range(spec.frames):
+        blur = _blur_vector(
+            camera, trajectory, float(timestamps[index]), float(conditions.exposure_s[index])
+        )
+        frame = renderer.render(
+            rotations[index],
+            positions[index],
+            blur_px=blur,
+            gain=float(conditions.gain[index]),
+            gamma=float(conditions.gamma[index]),
+            noise_index=index,
+            noise_offset=(int(rng.integers(0, 64)), int(rng.integers(0, 64))),
+        )
+        path = out / "img" / f"{index + 1:05d}.jpg"
+        if not cv2.imwrite(str(path), frame, [cv2.IMWRITE_JPEG_QUALITY, settings.jpeg_quality]):
+            raise InputError(f"cannot write {path}")
+        if progress is not None:
+            progress(1)
+    return out
+
+
+def _write_ground_truth(
+    out: Path,
+    spec: SequenceSpec,
+    scene: Scene,
+    boxes: dict[str, np.ndarray],
+    poses: tuple[np.ndarray, np.ndarray, np.ndarray],
+) -> None:
+    """scene.json, boxes.json, poses_gt.tum, groundtruth/<landmark>.txt and sequence.json."""
+    settings = spec.settings
+    timestamps, rotations, positions = poses
     (out / "img").mkdir(parents=True, exist_ok=True)
     (out / "groundtruth").mkdir(exist_ok=True)
     # Frames of an earlier, longer rendering would otherwise stay behind.
@@ -321,27 +358,3 @@ def render_sequence(
         "poses": "TUM, camera-to-world, OpenCV camera axes (x right, y down, z forward)",
     }
     (out / "sequence.json").write_text(json.dumps(metadata, indent=2) + "\n", encoding="utf-8")
-
-    renderer = Renderer(camera, spec.seed, settings.noise_sigma)
-    conditions = frame_conditions(spec)
-    trajectory = spec.camera_path()
-    rng = np.random.default_rng(spec.seed + 15485863)
-    for index in range(spec.frames):
-        blur = _blur_vector(
-            camera, trajectory, float(timestamps[index]), float(conditions.exposure_s[index])
-        )
-        frame = renderer.render(
-            rotations[index],
-            positions[index],
-            blur_px=blur,
-            gain=float(conditions.gain[index]),
-            gamma=float(conditions.gamma[index]),
-            noise_index=index,
-            noise_offset=(int(rng.integers(0, 64)), int(rng.integers(0, 64))),
-        )
-        path = out / "img" / f"{index + 1:05d}.jpg"
-        if not cv2.imwrite(str(path), frame, [cv2.IMWRITE_JPEG_QUALITY, settings.jpeg_quality]):
-            raise InputError(f"cannot write {path}")
-        if progress is not None:
-            progress(1)
-    return out

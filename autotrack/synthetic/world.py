@@ -259,6 +259,11 @@ def build_world(seed: int) -> tuple[list[TexturedPlane], list[list[TexturedPlane
     """The room's planes (drawn first, in any order) and the objects (stands with their
     landmarks, wall landmarks), each a list of planes drawn back to front as one group."""
     rng = np.random.default_rng(seed)
+    room = _room_planes(rng)  # textures draw from rng in this order: room, then landmarks
+    return room, _landmark_objects(rng)
+
+
+def _room_planes(rng: np.random.Generator) -> list[TexturedPlane]:
     x0, x1 = ROOM_X
     y0, y1 = ROOM_Y
     width_x, length_y, height = x1 - x0, y1 - y0, ROOM_HEIGHT
@@ -317,6 +322,10 @@ def build_world(seed: int) -> tuple[list[TexturedPlane], list[list[TexturedPlane
             False,
         ),
     ]
+    return room
+
+
+def _landmark_objects(rng: np.random.Generator) -> list[list[TexturedPlane]]:
     objects: list[list[TexturedPlane]] = []
     for landmark_id, placed in LANDMARK_LAYOUT.items():
         centre, side = placed.centre, placed.side_m
@@ -358,4 +367,4 @@ def build_world(seed: int) -> tuple[list[TexturedPlane], list[list[TexturedPlane
                 marker,
             ]
         )
-    return room, objects
+    return objects
