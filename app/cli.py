@@ -99,7 +99,7 @@ def rendered_demo() -> Path:
     The renderer is deterministic, so this is the same sequence as static/demo; it is rendered
     once (a few seconds) and reused.
     """
-    from autotrack.synthetic.renderer import generate_demo
+    from autotrack.synthetic.testbed import generate_demo
 
     cache = Path(os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache")
     demo = cache / "autotrack-studio" / "demo"
