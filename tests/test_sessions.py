@@ -15,7 +15,7 @@ import pytest
 from mcap.reader import make_reader
 from mcap.writer import Writer
 
-import autotrack.sessions.recorder
+import autotrack.sessions.metadata
 from autotrack.cli import main
 from autotrack.errors import SessionError
 from autotrack.io.otb_boxes import read_boxes
@@ -637,7 +637,7 @@ def test_non_mcap_empty_missing_and_foreign_files_get_clear_errors(tmp_path: Pat
 def test_session_from_a_newer_format_version_is_refused(
     tmp_path: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:
-    monkeypatch.setattr(autotrack.sessions.recorder, "FORMAT_VERSION", FORMAT_VERSION + 1)
+    monkeypatch.setattr(autotrack.sessions.metadata, "FORMAT_VERSION", FORMAT_VERSION + 1)
     with SessionRecorder(tmp_path / "new.mcap", source="x", tracker_params={}) as recorder:
         recorder.log_target("t1", _results(0, range(2), 1)[1])
     monkeypatch.undo()

@@ -1,4 +1,4 @@
-"""CSV tables: one writer for every table we export (comma-separated, "\n" line ends)."""
+"""CSV tables: one writer for every table we export (comma-separated, Unix line ends)."""
 
 from __future__ import annotations
 

@@ -1,19 +1,10 @@
-"""A synthetic test bed like the paper's localisation experiment (section 5.3, Table 3).
-
-An indoor room (wooden floor, painted walls with posters and doors, tiled ceiling) with four
-distinct planar landmarks, two on the back wall and two on stands at different depths, filmed by
-a camera modelled on the paper's Intel RealSense R200 colour stream (1280x720, 10 fps, ~70 deg
-horizontal field of view, mild lens distortion) moving along one of six trajectories. Each frame
-carries a global lighting change (gain and gamma drift, a dimming event), sensor noise, motion
-blur in long-exposure bursts and JPEG compression; the ground truth (camera poses, intrinsics,
-landmark positions, per-frame landmark boxes) is exact.
+"""Rendering a synthetic sequence (frames and ground-truth files).
 
 Rendering uses OpenCV only: every plane is one `cv2.warpPerspective` of a procedurally generated
 texture (a mip level chosen per frame) into the bounding rectangle of its visible polygon, drawn
-far to near; lens distortion is one `cv2.remap`. Everything is seeded: the same seed gives the
-same bytes.
-
-World frame: x right, y forward (towards the back wall), z up, metres. Camera: OpenCV convention.
+far to near; lens distortion is one `cv2.remap`. Each frame carries a global lighting change
+(gain and gamma drift, a dimming event), sensor noise, motion blur in long-exposure bursts and
+JPEG compression. Everything is seeded: the same seed gives the same bytes.
 """
 
 from __future__ import annotations
