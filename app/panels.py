@@ -63,6 +63,8 @@ class QuietWrites:
 
 @dataclass
 class SequencePanel:
+    """The Sequence folder: pick, type or upload a sequence, its scene and the tracker."""
+
     dropdown: viser.GuiDropdownHandle
     open_listed: viser.GuiButtonHandle
     refresh: viser.GuiButtonHandle
@@ -95,6 +97,8 @@ def _sequence_panel(gui: viser.GuiApi, config: AppConfig) -> SequencePanel:
 
 @dataclass
 class TargetsPanel:
+    """The Targets folder: the table, which target a drag draws, its landmark, typed box."""
+
     table: viser.GuiMarkdownHandle
     draw: viser.GuiDropdownHandle
     landmark: viser.GuiDropdownHandle
@@ -121,6 +125,8 @@ def _targets_panel(gui: viser.GuiApi) -> TargetsPanel:
 
 @dataclass
 class PlaybackPanel:
+    """The Playback folder: play / pause, steps, the frame slider and the speed."""
+
     play: viser.GuiButtonHandle
     step_back: viser.GuiButtonHandle
     step: viser.GuiButtonHandle
@@ -147,6 +153,8 @@ def _playback_panel(gui: viser.GuiApi) -> PlaybackPanel:
 
 @dataclass
 class DisplayPanel:
+    """The Display folder: canvas mode, maps, canvas frame-rate cap (and the Maps folder)."""
+
     canvas: viser.GuiDropdownHandle
     maps: viser.GuiDropdownHandle
     canvas_fps: viser.GuiSliderHandle
@@ -176,6 +184,8 @@ def _display_panel(gui: viser.GuiApi, config: AppConfig) -> DisplayPanel:
 
 @dataclass
 class SessionPanel:
+    """The Session folder: recording status, downloads, reopening a session."""
+
     recording: viser.GuiMarkdownHandle
     download_tracks: viser.GuiButtonHandle
     download_poses: viser.GuiButtonHandle

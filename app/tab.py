@@ -198,9 +198,9 @@ class Tab:
         self.controller.message = message
 
     def _report(self, message: str) -> None:
+        """A failed command or frame: tell the user (the panels follow after it)."""
         self.controller.message = message
         self.channel.notify("AutoTrack Studio", message, error=True)
-        show_state(self.panels, self.controller)
         self._publish()
 
     def _aim_camera(self) -> None:
