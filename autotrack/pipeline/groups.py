@@ -45,11 +45,6 @@ class TrackerGroups:
     def __bool__(self) -> bool:
         return bool(self._groups)
 
-    def head_of(self, target_id: str) -> int | None:
-        """The frame a target's tracker is at (None: not tracked)."""
-        group = self._group_of(target_id)
-        return None if group is None else group.head
-
     def start(
         self, frame_index: int, frame: np.ndarray, boxes: Mapping[str, Box]
     ) -> dict[str, TrackResult]:

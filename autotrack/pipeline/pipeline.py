@@ -134,11 +134,6 @@ class Pipeline:
         """The recording's file (None until the first edit, or when not recording)."""
         return None if self._recorder is None else self._recorder.path
 
-    @property
-    def saved_frame_index(self) -> int | None:
-        """Highest frame whose records reached the OS (None: nothing saved yet)."""
-        return None if self._recorder is None else self._recorder.saved_frame_index
-
     def flush(self) -> None:
         """Hand everything recorded so far to the OS (e.g. before exporting the session)."""
         if self._recorder is not None:
