@@ -27,14 +27,13 @@ from autotrack.datasets import Sequence, load_sequences, read_boxes
 from autotrack.errors import InputError
 from autotrack.evaluation import score_sequence
 from autotrack.peers import TRACKER_NAMES, OpenCVPeer, make_tracker
-
-REPO = Path(__file__).resolve().parents[1]
-SHARED = REPO / ".." / "shared" / "data"
+from tests.conftest import COLOUR_TABLE, SEQUENCES
 
 
 def _shared_sequence(dataset: str, name: str, frames: int) -> Sequence:
     """The first `frames` frames of a shared real sequence (skips when the data is absent)."""
-    roots = load_sequences(SHARED / "sequences" / dataset / name) if SHARED.is_dir() else []
+    folder = SEQUENCES / dataset / name
+    roots = load_sequences(folder) if folder.is_dir() else []
     if not roots:
         pytest.skip("shared data not available")
     sequence = roots[0]
@@ -260,7 +259,7 @@ def test_autotrack_presets_run_through_the_benchmark(tmp_path):
 
 def test_colour_table_reaches_the_autotrack_variants_and_the_json(tmp_path):
     _require_autotrack()
-    table = SHARED / "color_names" / "cn_norm_32768x10.npy"
+    table = COLOUR_TABLE
     if not table.is_file():
         pytest.skip("shared Color Names table not available")
     sequence = _shared_sequence("UAV123_10fps", "building5", 10)
