@@ -314,6 +314,7 @@ def short_sequence(tmp_path_factory):
     return render_sequence(tmp_path_factory.mktemp("localize") / "short", spec)
 
 
+@pytest.mark.slow
 def test_pipeline_on_a_generated_sequence_stays_within_three_centimetres(short_sequence):
     scene = load_scene(short_sequence / "scene.json")
     boxes = {k: v for k, v in json.loads((short_sequence / "boxes.json").read_text()).items()}
@@ -352,6 +353,7 @@ def test_pipeline_rejects_intrinsics_for_another_image_size(short_sequence):
         next(localize_sequence(open_frames(short_sequence), other, boxes, preset("autotrack")))
 
 
+@pytest.mark.slow
 def test_pipeline_survives_a_landmark_that_disappears(short_sequence):
     """Landmark C is painted over from frame 8: every frame is then a trusted pose close to the
     truth or an explicitly invalid one, never a crash or a silent wrong pose."""
@@ -386,6 +388,7 @@ def test_pipeline_survives_a_landmark_that_disappears(short_sequence):
     assert sum(noticed) >= len(noticed) // 2
 
 
+@pytest.mark.slow
 def test_cli_localize_writes_tum_and_csv_and_prints_table3(short_sequence, tmp_path, capsys):
     out, tracks = tmp_path / "poses.tum", tmp_path / "tracks.csv"
     code = main(
