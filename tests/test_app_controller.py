@@ -13,6 +13,7 @@ import zipfile
 from pathlib import Path
 from types import SimpleNamespace
 
+import cv2
 import numpy as np
 import pytest
 
@@ -550,7 +551,14 @@ def test_installs_without_the_repo_render_the_same_demo_into_the_cache(tmp_path,
         assert (demo / name).read_text() == (DEMO / name).read_text()
     frames = sorted((demo / "img").iterdir())
     assert [f.name for f in frames] == sorted(f.name for f in (DEMO / "img").iterdir())
-    assert frames[0].read_bytes() == (DEMO / "img" / frames[0].name).read_bytes()
+    rendered = cv2.imread(str(frames[0])).astype(np.int16)
+    shipped = cv2.imread(str(DEMO / "img" / frames[0].name)).astype(np.int16)
+    assert rendered.shape == shipped.shape
+    if cv2.__version__.startswith("5."):  # static/demo was rendered with OpenCV 5
+        assert frames[0].read_bytes() == (DEMO / "img" / frames[0].name).read_bytes()
+    # OpenCV 4.x rounds warpPerspective/remap differently (docs/dependencies.md): 0.42 grey
+    # levels on average there, against 4.4 for a one-pixel shift of the same frame.
+    assert np.abs(rendered - shipped).mean() < 1.0
     # Rendered once: a second launch reuses it.
     stamp = (demo / "scene.json").stat().st_mtime_ns
     assert rendered_demo() == demo and (demo / "scene.json").stat().st_mtime_ns == stamp

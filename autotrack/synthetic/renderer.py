@@ -55,6 +55,19 @@ def _clip_near(points_camera: np.ndarray, near: float) -> np.ndarray:
     return np.array(out).reshape(-1, 3)
 
 
+def _undistort_pixels(
+    points: np.ndarray, matrix: np.ndarray, distortion: np.ndarray, criteria: tuple
+) -> np.ndarray:
+    """Undistorted pixel positions (N x 1 x 2) of distorted ones, iterated to `criteria`.
+
+    OpenCV 4.x takes the criteria only through `undistortPointsIter` (its `undistortPoints`
+    stops after 5 iterations); OpenCV 5 dropped `undistortPointsIter` and gave `undistortPoints`
+    a criteria argument instead."""
+    if hasattr(cv2, "undistortPointsIter"):
+        return cv2.undistortPointsIter(points, matrix, distortion, None, matrix, criteria)
+    return cv2.undistortPoints(points, matrix, distortion, None, None, matrix, criteria)
+
+
 class Renderer:
     """Draws the world for a camera pose: pinhole render on a margin-padded canvas, then lens
     distortion, motion blur, lighting, noise. Frames are BGR uint8."""
@@ -65,13 +78,10 @@ class Renderer:
         size = (camera.width, camera.height)
         grid = np.stack(np.meshgrid(np.arange(size[0]), np.arange(size[1])), axis=-1)
         if camera.distortion and any(camera.distortion):
-            undistorted = cv2.undistortPoints(
+            undistorted = _undistort_pixels(
                 grid.reshape(-1, 1, 2).astype(np.float64),
                 camera.matrix(),
                 camera.distortion_array(),
-                None,
-                None,
-                camera.matrix(),
                 (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 40, 1e-6),
             ).reshape(size[1], size[0], 2)
         else:
