@@ -120,23 +120,100 @@ def as_rgb(image: np.ndarray) -> np.ndarray:
     return image
 
 
-def normalised(values: np.ndarray) -> np.ndarray:
-    """A float map min-max scaled to 0..1 (all zeros when flat; NaN and inf count as 0)."""
-    finite = np.nan_to_num(values.astype(np.float32), nan=0.0, posinf=0.0, neginf=0.0)
-    low, high = float(finite.min()), float(finite.max())
-    if high <= low:
-        return np.zeros(finite.shape, np.float32)
-    return (finite - low) / (high - low)
+Limits = tuple[float, float]
+
+ROBUST_PERCENTILES = (2.0, 98.0)
+"""The local-variation colour scale spans these percentiles of the map's finite values: the
+variation divides by the previous response, so a few near-zero divisors would otherwise set
+the scale and leave one hot pixel."""
 
 
-def colour_map(values: np.ndarray) -> np.ndarray:
-    """A float map as an RGB image (min-max scaled, OpenCV's JET colour map)."""
-    scaled = np.round(normalised(values) * 255.0).astype(np.uint8)
+def robust_limits(values: np.ndarray) -> Limits | None:
+    """(low, high) percentiles ROBUST_PERCENTILES of the finite values (None: none finite)."""
+    finite = values[np.isfinite(values)]
+    if finite.size == 0:
+        return None
+    low, high = np.percentile(finite, ROBUST_PERCENTILES)
+    return (float(low), float(high))
+
+
+def log_limits(values: np.ndarray) -> Limits | None:
+    """(min, max) of log10 of the positive finite values (the ASR weights span decades)."""
+    positive = values[np.isfinite(values) & (values > 0)]
+    if positive.size == 0:
+        return None
+    return (float(np.log10(positive.min())), float(np.log10(positive.max())))
+
+
+def normalised(values: np.ndarray, limits: Limits | None = None) -> np.ndarray:
+    """A float map scaled to 0..1 between `limits` (default its min and max) and clipped (all
+    zeros when flat; NaN and inf count as the low end)."""
+    data = values.astype(np.float32)
+    finite = np.isfinite(data)
+    if limits is None:
+        if not finite.any():
+            return np.zeros(data.shape, np.float32)
+        limits = (float(data[finite].min()), float(data[finite].max()))
+    low, high = limits
+    if not high > low:
+        return np.zeros(data.shape, np.float32)
+    scaled = (np.where(finite, data, low) - low) / (high - low)
+    return np.clip(scaled, 0.0, 1.0).astype(np.float32)
+
+
+def colour_map(values: np.ndarray, limits: Limits | None = None) -> np.ndarray:
+    """A float map as an RGB image (scaled to `limits`, default min-max; OpenCV's JET)."""
+    scaled = np.round(normalised(values, limits) * 255.0).astype(np.uint8)
     return cv2.cvtColor(cv2.applyColorMap(scaled, cv2.COLORMAP_JET), cv2.COLOR_BGR2RGB)
 
 
-def map_panel(values: np.ndarray | None, size: int = 160) -> np.ndarray:
-    """A colour-mapped map enlarged to `size` pixels square for a GUI image (grey if None)."""
+def _label(image: np.ndarray, text: str, origin: tuple[int, int], colour=(0, 0, 0)) -> None:
+    cv2.putText(image, text, origin, cv2.FONT_HERSHEY_SIMPLEX, 0.38, colour, 1, cv2.LINE_AA)
+
+
+def legend_bar(width: int, limits: Limits | None, unit: str = "") -> np.ndarray:
+    """A white strip with the JET colour bar and its low and high values (`unit` after them)."""
+    strip = np.full((26, width, 3), 255, np.uint8)
+    ramp = np.linspace(0.0, 1.0, width - 8, dtype=np.float32)[None, :].repeat(8, axis=0)
+    strip[2:10, 4 : width - 4] = colour_map(ramp, (0.0, 1.0))
+    if limits is not None:
+        _label(strip, f"{limits[0]:.3g}{unit}", (4, 22))
+        high = f"{limits[1]:.3g}{unit}"
+        _label(strip, high, (width - 4 - 7 * len(high), 22))
+    return strip
+
+
+MAP_TILE = 160
+"""Side of one map tile in a target's map panel (pixels)."""
+
+
+def map_tile(
+    values: np.ndarray | None, title: str, scale: str = "minmax", size: int = MAP_TILE
+) -> np.ndarray:
+    """A titled, colour-mapped map with its legend. `scale`: 'minmax', 'robust' (the
+    ROBUST_PERCENTILES) or 'log' (log10, legend in decades). Grey when `values` is None."""
+    header = np.full((18, size, 3), 255, np.uint8)
+    _label(header, title, (3, 13))
+    if values is None:
+        body, limits, unit = np.full((size, size, 3), 64, np.uint8), None, ""
+    else:
+        data = values.astype(np.float32)
+        if scale == "log":
+            with np.errstate(divide="ignore", invalid="ignore"):
+                data = np.log10(np.where(data > 0, data, np.nan))
+            limits, unit = log_limits(values), " (log10)"
+        elif scale == "robust":
+            limits, unit = robust_limits(data), ""
+        else:
+            finite = data[np.isfinite(data)]
+            limits = None if finite.size == 0 else (float(finite.min()), float(finite.max()))
+            unit = ""
+        body = cv2.resize(colour_map(data, limits), (size, size), interpolation=cv2.INTER_NEAREST)
+    return np.concatenate([header, body, legend_bar(size, limits, unit)], axis=0)
+
+
+def map_panel(values: np.ndarray | None, size: int = MAP_TILE) -> np.ndarray:
+    """A colour-mapped map (min-max) enlarged to `size` pixels square (grey if None)."""
     if values is None:
         return np.full((size, size, 3), 64, dtype=np.uint8)
     return cv2.resize(colour_map(values), (size, size), interpolation=cv2.INTER_NEAREST)
@@ -156,8 +233,15 @@ def peak_position(result: TrackResult) -> tuple[float, float] | None:
     return (sx + (col + 0.5) * sw / cols, sy + (row + 0.5) * sh / rows)
 
 
-def blend_map(image: np.ndarray, values: np.ndarray, region: Box, opacity: float) -> None:
-    """Blend a colour-mapped map over `region` (x, y, w, h) of `image`, in place.
+def blend_map(
+    image: np.ndarray,
+    values: np.ndarray,
+    region: Box,
+    opacity: float,
+    limits: Limits | None = None,
+) -> None:
+    """Blend a colour-mapped map (scaled to `limits`, default min-max) over `region` (x, y, w,
+    h) of `image`, in place.
 
     Each pixel's opacity grows with the map's value, so the high responses stand out and the
     low ones leave the frame visible.
@@ -166,8 +250,8 @@ def blend_map(image: np.ndarray, values: np.ndarray, region: Box, opacity: float
     left, top = round(x), round(y)
     width, height = max(1, round(w)), max(1, round(h))
     size = (width, height)
-    coloured = cv2.resize(colour_map(values), size, interpolation=cv2.INTER_LINEAR)
-    weight = cv2.resize(normalised(values), size, interpolation=cv2.INTER_LINEAR) * opacity
+    coloured = cv2.resize(colour_map(values, limits), size, interpolation=cv2.INTER_LINEAR)
+    weight = cv2.resize(normalised(values, limits), size, interpolation=cv2.INTER_LINEAR) * opacity
     img_h, img_w = image.shape[:2]
     x0, y0 = max(left, 0), max(top, 0)
     x1, y1 = min(left + width, img_w), min(top + height, img_h)
@@ -189,6 +273,8 @@ class TargetDrawing:
     result: TrackResult | None
     """The tracker's result for this frame (None for a freshly drawn, untracked box)."""
     selected: bool = False
+    previous_response: np.ndarray | None = None
+    """The target's response map on the frame before (for the map panels)."""
 
 
 def draw_overlays(
@@ -215,13 +301,19 @@ def draw_overlays(
 
     line = max(1, round(canvas.shape[1] / 640))
     if map_kind in ("response", "local_variation"):
+        legend: Limits | None = None
         for target in targets:
             result = target.result
             if result is None:
                 continue
             values = result.response_map if map_kind == "response" else result.local_variation
-            if values is not None:
-                blend_map(canvas, values, scaled(result.search_box), map_opacity)
+            if values is None:
+                continue
+            limits = robust_limits(values) if map_kind == "local_variation" else None
+            blend_map(canvas, values, scaled(result.search_box), map_opacity, limits)
+            legend = limits or legend
+        if legend is not None:
+            _legend_on(canvas, legend)
     for target in targets:
         x, y, w, h = scaled(target.box)
         top_left = (round(x), round(y))
@@ -261,6 +353,14 @@ def draw_overlays(
             cv2.LINE_AA,
         )
     return canvas
+
+
+def _legend_on(canvas: np.ndarray, limits: Limits) -> None:
+    """The local-variation colour scale in the frame's top-right corner, in place."""
+    width = min(220, canvas.shape[1])
+    bar = legend_bar(width, limits)
+    _label(bar, "local var. p2-p98", (width // 2 - 55, 22), (80, 80, 80))
+    canvas[: bar.shape[0], canvas.shape[1] - width :] = bar
 
 
 def scaled_for_display(image: np.ndarray, max_width: int) -> np.ndarray:

@@ -71,6 +71,12 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
         default=5.0,
         help="initial cap on frames/s drawn on the 3-D canvas (software WebGL is slow)",
     )
+    parser.add_argument(
+        "--max-targets",
+        type=int,
+        default=4,
+        help="most targets a tab may have at once (default 4: the demo scene's landmarks)",
+    )
     parser.set_defaults(func=run)
 
 
@@ -125,6 +131,8 @@ def run(args: argparse.Namespace) -> int:
         raise InputError(f"--port must be 0..65535, got {args.port}")
     if not args.canvas_fps > 0:
         raise InputError(f"--canvas-fps must be positive, got {args.canvas_fps}")
+    if args.max_targets < 1:
+        raise InputError(f"--max-targets must be at least 1, got {args.max_targets}")
     roots = startup_roots(args.sequence, args.scene, args.allow_roots)
 
     from app.server import StudioServer  # viser loads only when the app starts
@@ -138,6 +146,7 @@ def run(args: argparse.Namespace) -> int:
         allowed_roots=tuple(roots),
         tracker_preset=args.preset,
         canvas_fps=args.canvas_fps,
+        max_targets=args.max_targets,
     )
     if config.sequence is None and not config.demo_dir.is_dir():
         config = replace(config, demo_dir=rendered_demo())

@@ -33,6 +33,8 @@ class AppConfig:
     """Tracker preset of new runs (autotrack, strcf, strcf+asr, strcf+atr)."""
     tracker_threads: int = 2
     """Threads each multi-target tracker may use."""
+    max_targets: int = 4
+    """Most targets a tab may have at once (four landmarks with the demo's scene)."""
     canvas_fps: float = 5.0
     """Initial cap on frames per second sent to the 3-D canvas background (software WebGL
     draws only a few per second; the GUI video panel is not capped)."""

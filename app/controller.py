@@ -9,59 +9,35 @@ ever sees the immutable `FrameView` snapshots of `snapshot()`. Tests drive this 
 
 from __future__ import annotations
 
-import math
+import time
 from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
 
 from app import exports
+from app.boxes import Box, ground_truth_positions
 from app.config import AppConfig
+from app.landmarks import LandmarkTies
 from app.paths import display_name, find_sequences, resolve_user_path, store_upload
 from app.recordings import RecordingRegistry
 from app.views import FrameView, frame_view
 from autotrack.errors import InputError
+from autotrack.evaluation.metrics import overlaps
 from autotrack.io.boxes_json import read_boxes_json
 from autotrack.io.frames import FrameSource, open_frames
-from autotrack.io.tum import read_tum
 from autotrack.localization.pnp import boxes_by_landmark
 from autotrack.localization.scene import Scene, load_scene
 from autotrack.params import PRESETS, preset
 from autotrack.pipeline import Pipeline, Recording, TrackedTarget
 from autotrack.sessions import open_session
 
-Box = tuple[float, float, float, float]
+OVERLAP_CORRECTS = 0.5
+"""A new box overlapping a target's box on the frame by more than this IoU corrects that target
+instead of stacking a new one on it."""
 
 EXPORTS = ("tracks", "poses", "mcap")
 """What `export` can build: the tracks zip, the TUM poses, the session file itself."""
-
-
-def parse_box(text: str) -> Box:
-    """'x, y, w, h' (0-based pixels) typed by the user."""
-    parts = [part for part in text.replace(";", ",").replace(" ", ",").split(",") if part]
-    try:
-        values = [float(part) for part in parts]
-    except ValueError:
-        raise InputError(f"type the box as four numbers 'x, y, w, h', not {text!r}") from None
-    if len(values) != 4 or not all(math.isfinite(value) for value in values):
-        raise InputError(f"type the box as four numbers 'x, y, w, h', not {text!r}")
-    return (values[0], values[1], values[2], values[3])
-
-
-def format_box(box: Box) -> str:
-    """A box as the text field shows it."""
-    return ", ".join(f"{value:.1f}" for value in box)
-
-
-def ground_truth_positions(scene_path: Path | None) -> np.ndarray | None:
-    """Camera positions of the `poses_gt.tum` beside a scene file, if there is one."""
-    if scene_path is None:
-        return None
-    tum = scene_path.parent / "poses_gt.tum"
-    if not tum.is_file():
-        return None
-    _stamps, positions, _quaternions = read_tum(tum)
-    return positions
 
 
 class TabController:
@@ -113,6 +89,11 @@ class TabController:
         """How many sequences this tab opened (the 3-D scene is rebuilt when it changes)."""
         self.recording_path: Path | None = None
         """The session file this tab writes and has claimed in `recordings`."""
+        self.ties = LandmarkTies()
+        """Which target is which landmark: the search's last outcome, the hand-chosen ties."""
+        self.play_seconds = np.zeros(0)
+        """Per frame: seconds from the previous played frame to this one (NaN: not played)."""
+        self._played_at: float | None = None
 
     # -- reading the state --------------------------------------------------------------------
 
@@ -233,6 +214,8 @@ class TabController:
         self.boxes_path = boxes if boxes.is_file() and run.scene is not None else None
         self.cursor = 0
         self.selected = None
+        self.ties = LandmarkTies()
+        self.play_seconds = np.full(run.frame_count, np.nan)
         self.sequences_opened += 1
         scene = run.scene
         landmarks = "" if scene is None else f", scene with {len(scene.landmarks)} landmarks"
@@ -262,22 +245,59 @@ class TabController:
 
     def place_box(self, box: Box) -> None:
         """A box drawn or typed on the current frame: a new target, or the selected target's
-        box redrawn (a correction when it was tracked there; it re-tracks from here)."""
+        box redrawn (a correction when it was tracked there; it re-tracks from here). A new box
+        on top of a target's box corrects that target instead. With a scene, new targets are
+        tied to landmarks by the correspondence search once four boxes are on the frame."""
         run = self.require_run()
         self.stop_playing()
-        if self.selected is None:
-            target_id = run.add_target(self.cursor, box)
-            landmark = run.targets[target_id].landmark_id
-            tied = f" → landmark {landmark}" if landmark else ""
-            self.message = f"{target_id}{tied} drawn at frame {self.cursor + 1}."
+        target_id = self.selected or self._overlapped(box)
+        if target_id is None:
+            if len(run.targets) >= self.config.max_targets:
+                raise InputError(
+                    f"already {len(run.targets)} targets (the maximum): choose a target in "
+                    "'Drag draws' to redraw its box, or delete one first"
+                )
+            target_id = run.add_target(self.cursor, box, None)
+            self.message = f"{target_id} drawn at frame {self.cursor + 1}."
+            self._search_landmarks()
         else:
-            corrected = self.cursor in run.targets[self.selected].results
-            run.place_box(self.selected, self.cursor, box)
+            corrected = self.cursor in run.targets[target_id].results
+            run.place_box(target_id, self.cursor, box)
             verb = "corrected" if corrected else "drawn"
+            why = "" if self.selected else " (the new box lies on it)"
             self.message = (
-                f"{self.selected} {verb} at frame {self.cursor + 1}; it re-tracks from here."
+                f"{target_id} {verb}{why} at frame {self.cursor + 1}; it re-tracks from here."
             )
         self._claim_recording()
+
+    def _overlapped(self, box: Box) -> str | None:
+        """The target whose box on the current frame the new `box` overlaps most, if by more
+        than OVERLAP_CORRECTS."""
+        shown = [t for t in self.targets() if self.cursor in t.results]
+        if not shown:
+            return None
+        boxes = np.array([t.results[self.cursor].box for t in shown])
+        ious = overlaps(np.repeat(np.array([box]), len(shown), axis=0), boxes)
+        best = int(np.argmax(ious))
+        return shown[best].id if ious[best] > OVERLAP_CORRECTS else None
+
+    def _search_landmarks(self) -> None:
+        """Tie the targets on this frame to landmarks (see LandmarkTies.search) and say how."""
+        run = self.require_run()
+        outcome = self.ties.search(run, self.cursor)
+        if outcome is None:
+            free = run.free_landmarks()
+            if run.scene is not None and free:
+                self.message += (
+                    " Landmarks are tied once four boxes are drawn "
+                    f"({len(run.scene.landmarks) - len(free)} tied, {len(free)} to draw)."
+                )
+            return
+        if outcome.warning:
+            self.message += " " + outcome.warning
+            return
+        ties = ", ".join(f"{tid} → {run.targets[tid].landmark_id}" for tid in outcome.target_ids)
+        self.message += f" Landmarks by the correspondence search: {ties}."
 
     def select(self, target_id: str | None) -> None:
         """Choose the target a drag redraws (None: drags make new targets)."""
@@ -286,11 +306,16 @@ class TabController:
         self.selected = target_id
 
     def assign_landmark(self, landmark_id: str | None) -> None:
-        """Tie the selected target to `landmark_id` (None: to no landmark)."""
+        """Tie the selected target to `landmark_id` by hand (None: to no landmark); a target
+        holding that landmark takes the selected one's old landmark."""
         run = self.require_run()
         if self.selected is None:
             return
-        run.assign_landmark(self.selected, landmark_id, self.cursor)
+        if run.targets[self.selected].landmark_id == landmark_id:
+            return
+        swapped = self.ties.tie_by_hand(run, self.selected, landmark_id, self.cursor)
+        swap = "" if swapped is None else f"; {swapped} takes its old landmark"
+        self.message = f"{self.selected} tied to {landmark_id or 'no landmark'} by hand{swap}."
 
     def delete_selected(self) -> None:
         """Delete the selected target with its results."""
@@ -298,6 +323,7 @@ class TabController:
         if self.selected is None:
             raise InputError("choose the target to delete in 'Drag draws' first")
         run.delete_target(self.selected, self.cursor)
+        self.ties.forget(self.selected)
         self.message = f"Deleted {self.selected}."
         self.selected = None
 
@@ -329,6 +355,7 @@ class TabController:
     def stop_playing(self) -> None:
         """Pause (nothing happens when not playing)."""
         self.playing = False
+        self._played_at = None
 
     def play_step(self) -> None:
         """While playing: show (tracking it first) the next frame; stop at the last."""
@@ -337,6 +364,10 @@ class TabController:
             self.stop_playing()
             return
         self.visit(self.cursor + 1)
+        now = time.perf_counter()
+        if self._played_at is not None:
+            self.play_seconds[self.cursor] = now - self._played_at
+        self._played_at = now
         if self.cursor >= run.frame_count - 1:
             self.stop_playing()
 
@@ -436,7 +467,7 @@ class TabController:
         """Everything the display shows for the current frame (None without a run)."""
         if self.run is None:
             return None
-        return frame_view(self.run, self.cursor, self.selected, self.message)
+        return frame_view(self.run, self.cursor, self.selected, self.message, self.play_seconds)
 
     def close(self) -> None:
         """Stop playing and close the run (finishing its recording)."""

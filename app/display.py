@@ -23,7 +23,7 @@ from app.canvas import (
     draw_overlays,
     fit_letterbox,
     letterbox_image,
-    map_panel,
+    map_tile,
     thumbnail,
 )
 from app.channel import ClientChannel
@@ -45,8 +45,6 @@ DEFAULT_CANVAS_SIZE = (1280, 720)
 """Canvas size assumed until the browser reports one."""
 TIMES_KEPT = 2000
 """Send times kept per kind for measuring display rates."""
-MAP_PANEL_GAP = np.full((160, 4, 3), 255, np.uint8)
-"""White strip between the response and the local-variation map of a map panel."""
 
 
 @dataclass
@@ -68,11 +66,19 @@ class DisplayStats:
 
 
 def map_panel_image(view: FrameView, target_id: str) -> np.ndarray:
-    """A target's map panel: its response map and local-variation map side by side."""
-    result = view.drawings[target_id].result
-    response = None if result is None else result.response_map
-    variation = None if result is None else result.local_variation
-    return np.concatenate([map_panel(response), MAP_PANEL_GAP, map_panel(variation)], axis=1)
+    """A target's map panel, 2 x 2: the previous and the current response (min-max), the local
+    variation (robust scale) and the ASR spatial weights the filter trained with (log10)."""
+    drawing = view.drawings[target_id]
+    result = drawing.result
+    tiles = (
+        map_tile(drawing.previous_response, "previous response"),
+        map_tile(None if result is None else result.response_map, "response"),
+        map_tile(None if result is None else result.local_variation, "local variation", "robust"),
+        map_tile(None if result is None else result.spatial_window, "ASR weights u", "log"),
+    )
+    gap = np.full((tiles[0].shape[0], 4, 3), 255, np.uint8)
+    rows = [np.concatenate([tiles[i], gap, tiles[i + 1]], axis=1) for i in (0, 2)]
+    return np.concatenate([rows[0], np.full((4, rows[0].shape[1], 3), 255, np.uint8), rows[1]])
 
 
 class MapPanels:
@@ -100,7 +106,7 @@ class MapPanels:
             if handle is None:
                 with self.folder:
                     self._images[target_id] = self.gui.add_image(
-                        image, label=f"{target_id}: response | local variation", format="png"
+                        image, label=f"{target_id} maps", format="png"
                     )
             else:
                 handle.image = image
@@ -128,7 +134,7 @@ class DisplayLoop:
         self.panels = panels
         self.scene_api = scene_api
         self.channel = channel
-        self.plots = SignalPlots(gui)
+        self.plots = SignalPlots(gui, panels.debug.signals)
         self.view3d = SceneView(scene_api)
         self.map_panels = MapPanels(gui, panels.display.maps_folder)
         self.stats = DisplayStats()
@@ -291,7 +297,7 @@ class DisplayLoop:
 
     def _send_slow(self, view: FrameView, maps: str) -> None:
         self.panels.quiet.set(self.panels.status, "content", view.status)
-        self.plots.update(view.history)
+        self.plots.update(view.history, view.frame_index)
         self.stats.plot_updates += 1
         if view.pose_view is not None:
             self.view3d.update(view.pose_view, thumbnail(view.frame))

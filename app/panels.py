@@ -15,8 +15,9 @@ from typing import Any
 import numpy as np
 import viser
 
+from app.boxes import format_box
 from app.config import AppConfig
-from app.controller import TabController, format_box
+from app.controller import TabController
 from autotrack.params import PRESETS
 
 NEW_TARGET = "new target"
@@ -162,7 +163,9 @@ class DisplayPanel:
     """Holds one image per target while `maps` is MAPS_PANELS (see app/display.py)."""
 
 
-def _display_panel(gui: viser.GuiApi, config: AppConfig) -> DisplayPanel:
+def _display_panel(
+    gui: viser.GuiApi, config: AppConfig, maps_tab: viser.GuiTabHandle
+) -> DisplayPanel:
     with gui.add_folder("Display"):
         canvas = gui.add_dropdown(
             "Canvas", options=(CANVAS_FRAME, CANVAS_3D), initial_value=CANVAS_FRAME
@@ -179,7 +182,12 @@ def _display_panel(gui: viser.GuiApi, config: AppConfig) -> DisplayPanel:
             step=1,
             initial_value=min(30, max(1, round(config.canvas_fps))),
         )
-    return DisplayPanel(canvas, maps, canvas_fps, gui.add_folder("Maps", visible=False))
+    with maps_tab:
+        gui.add_markdown(
+            "Choose *Display → Maps → panels (per target)* to show each target's maps here."
+        )
+        folder = gui.add_folder("Maps per target", visible=False)
+    return DisplayPanel(canvas, maps, canvas_fps, folder)
 
 
 @dataclass
@@ -209,6 +217,34 @@ def _session_panel(gui: viser.GuiApi) -> SessionPanel:
 
 
 @dataclass
+class DebugPanel:
+    """The debugging window docked left (wide enough to read the charts): the signal charts,
+    the per-target map panels, the ground-truth scores."""
+
+    panel: viser.PanelHandle
+    signals: viser.GuiTabHandle
+    maps: viser.GuiTabHandle
+    truth: viser.GuiTabHandle
+
+
+DEBUG_WIDTH = 520
+"""Width of the debugging window (CSS pixels)."""
+
+
+def _debug_panel(gui: viser.GuiApi) -> DebugPanel:
+    panel = gui.add_panel()
+    debug = DebugPanel(
+        panel=panel,
+        signals=panel.add_tab("Signals"),
+        maps=panel.add_tab("Maps"),
+        truth=panel.add_tab("Ground truth"),
+    )
+    panel.dock_left()
+    panel.set_width(DEBUG_WIDTH)
+    return debug
+
+
+@dataclass
 class Panels:
     """Every widget of a tab, top to bottom (the plots are added after these)."""
 
@@ -219,6 +255,7 @@ class Panels:
     playback: PlaybackPanel
     display: DisplayPanel
     session: SessionPanel
+    debug: DebugPanel
     quiet: QuietWrites
 
 
@@ -228,14 +265,16 @@ def build_panels(gui: viser.GuiApi, config: AppConfig) -> Panels:
     video = gui.add_image(
         np.zeros((90, 160, 3), np.uint8), label="Video", format="jpeg", jpeg_quality=80
     )
+    debug = _debug_panel(gui)
     return Panels(
         status=status,
         video=video,
         sequence=_sequence_panel(gui, config),
         targets=_targets_panel(gui),
         playback=_playback_panel(gui),
-        display=_display_panel(gui, config),
+        display=_display_panel(gui, config, debug.maps),
         session=_session_panel(gui),
+        debug=debug,
         quiet=QuietWrites(),
     )
 
@@ -300,15 +339,43 @@ def show_targets(panels: Panels, controller: TabController) -> None:
     quiet.set(widgets.boxes_json, "visible", controller.boxes_path is not None)
     if chosen is not None and controller.cursor in chosen.results:
         quiet.set(widgets.box, "value", format_box(chosen.results[controller.cursor].box))
+    quiet.set(widgets.table, "content", targets_table(controller))
+
+
+def targets_table(controller: TabController) -> str:
+    """The scene's landmarks (tied, or still to draw), the targets with their landmark, its
+    reprojection residual, box and progress, and the last landmark search's warning."""
+    run = controller.run
+    targets = controller.targets()
+    parts: list[str] = []
+    if run is not None and run.scene is not None:
+        tied = {target.landmark_id: target.id for target in targets if target.landmark_id}
+        items = [
+            f"**{landmark.id}** {landmark.name or ''} "
+            + (f"→ {tied[landmark.id]}" if landmark.id in tied else "· *to draw*")
+            for landmark in run.scene.landmarks
+        ]
+        parts.append("Landmarks: " + "; ".join(items))
     if not targets:
-        text = "No targets yet. Shift-drag on the frame to draw one."
-    else:
-        rows = ["| target | landmark | box at this frame | tracked to |", "|---|---|---|---|"]
-        for target in targets:
-            result = target.results.get(controller.cursor)
-            box = "—" if result is None else format_box(result.box)
-            rows.append(
-                f"| {target.id} | {target.landmark_id or '—'} | {box} | {target.last_frame + 1} |"
-            )
-        text = "\n".join(rows)
-    quiet.set(widgets.table, "content", text)
+        parts.append("No targets yet. Shift-drag on the frame to draw one (any order).")
+        return "\n\n".join(parts)
+    last = controller.ties.last
+    residuals = {} if last is None else last.residuals
+    rows = [
+        "| target | landmark | residual | box at this frame | tracked to |",
+        "|---|---|---|---|---|",
+    ]
+    for target in targets:
+        result = target.results.get(controller.cursor)
+        box = "—" if result is None else format_box(result.box)
+        residual = residuals.get(target.id)
+        by_hand = " (by hand)" if target.id in controller.ties.manual else ""
+        rows.append(
+            f"| {target.id} | {(target.landmark_id or '—') + by_hand} | "
+            f"{'—' if residual is None else f'{residual:.1f} px'} | {box} | "
+            f"{target.last_frame + 1} |"
+        )
+    parts.append("\n".join(rows))
+    if last is not None and last.warning:
+        parts.append(last.warning)
+    return "\n\n".join(parts)

@@ -14,9 +14,10 @@ from pathlib import Path
 import numpy as np
 import viser
 
+from app.boxes import parse_box
 from app.channel import ClientChannel
 from app.config import AppConfig
-from app.controller import TabController, parse_box
+from app.controller import TabController
 from app.display import DisplayLoop
 from app.panels import (
     CANVAS_3D,

@@ -38,6 +38,8 @@ class SignalHistory:
     """Target id -> signal name (see autotrack.pipeline.SIGNAL_NAMES) -> values over all frames."""
     frame_seconds: np.ndarray
     """Tracking time per frame (s), NaN where nothing was tracked."""
+    play_seconds: np.ndarray
+    """Time from the previous frame to this one while playing in the app (s), else NaN."""
     phi: float
     """Aberrance threshold on the global variation."""
     last_frame: int
@@ -62,9 +64,18 @@ class FrameView:
     """The status line (markdown)."""
 
 
-def frame_view(run: Pipeline, frame_index: int, selected: str | None, message: str) -> FrameView:
+def frame_view(
+    run: Pipeline,
+    frame_index: int,
+    selected: str | None,
+    message: str,
+    play_seconds: np.ndarray | None = None,
+) -> FrameView:
     """The snapshot of `run` at `frame_index` (`selected`: the target drawn thicker;
-    `message`: the tab's last message, under the status line)."""
+    `message`: the tab's last message, under the status line; `play_seconds`: the in-app time
+    per played frame)."""
+    if play_seconds is None:
+        play_seconds = np.full(run.frame_count, np.nan)
     drawings: dict[str, TargetDrawing] = {}
     signals: dict[str, dict[str, np.ndarray]] = {}
     colours: list[tuple[int, int, int]] = []
@@ -76,18 +87,21 @@ def frame_view(run: Pipeline, frame_index: int, selected: str | None, message: s
         if result is None:
             continue
         label = target.id if target.landmark_id is None else f"{target.id}:{target.landmark_id}"
+        previous = target.results.get(frame_index - 1)
         drawings[target.id] = TargetDrawing(
             label=label,
             colour=colour,
             box=result.box,
             result=result,
             selected=target.id == selected,
+            previous_response=None if previous is None else previous.response_map,
         )
     history = SignalHistory(
         target_ids=tuple(run.targets),
         colours=tuple(colours),
         signals=signals,
         frame_seconds=run.frame_seconds.copy(),
+        play_seconds=play_seconds.copy(),
         phi=run.params.phi,
         last_frame=run.furthest_frame,
         frame_count=run.frame_count,
@@ -101,7 +115,11 @@ def frame_view(run: Pipeline, frame_index: int, selected: str | None, message: s
         pose_view=pose_view,
         history=history,
         status=status_text(
-            run, frame_index, None if pose_view is None else pose_view.pose, message
+            run,
+            frame_index,
+            None if pose_view is None else pose_view.pose,
+            message,
+            rates_text(run.frame_seconds, play_seconds, frame_index),
         ),
     )
 
@@ -127,12 +145,34 @@ def _pose_view(run: Pipeline, frame_index: int) -> PoseView | None:
     )
 
 
-def status_text(run: Pipeline, frame_index: int, pose: PoseEstimate | None, message: str) -> str:
-    """The status line: sequence, frame, tracking progress, pose, then the last message."""
+RATE_WINDOW = 10
+"""Frames the status line's rates average over."""
+
+
+def rates_text(frame_seconds: np.ndarray, play_seconds: np.ndarray, frame_index: int) -> str:
+    """'playing N frames/s in the app · trackers alone M frames/s' over the RATE_WINDOW frames
+    up to `frame_index` ('' when nothing was played there)."""
+    start = max(0, frame_index - RATE_WINDOW + 1)
+    played = play_seconds[start : frame_index + 1]
+    played = played[np.isfinite(played)]
+    if played.size == 0:
+        return ""
+    tracked = frame_seconds[start : frame_index + 1]
+    tracked = tracked[np.isfinite(tracked)]
+    alone = f" · trackers alone {1.0 / tracked.mean():.1f} frames/s" if tracked.size else ""
+    return f"playing {1.0 / played.mean():.1f} frames/s in the app{alone}"
+
+
+def status_text(
+    run: Pipeline, frame_index: int, pose: PoseEstimate | None, message: str, rates: str = ""
+) -> str:
+    """The status line: sequence, frame, tracking progress, rates, pose, then the message."""
     parts = [
         f"**{run.frames.name}** · frame {frame_index + 1} / {run.frame_count}",
         f"tracked to {run.tracked_until + 1}" if run.targets else "no targets",
     ]
+    if rates:
+        parts.append(rates)
     if pose is not None:
         parts.append(pose_text(pose))
     text = " · ".join(parts)

@@ -41,6 +41,9 @@ class TrackResult:
     """Current scale relative to the first frame's target size."""
     search_box: tuple[float, float, float, float]
     """Image region (x, y, w, h, 0-based pixels) the response map covers."""
+    spatial_window: np.ndarray | None = None
+    """The spatial regularisation weights u the filter was trained with on this frame (eq. 3
+    with ASR), centred like the maps; None when the filter was not trained (aberrant)."""
 
     @property
     def center(self) -> tuple[float, float]:

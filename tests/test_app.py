@@ -25,7 +25,6 @@ from app.canvas import (
     draw_overlays,
     fit_letterbox,
     letterbox_image,
-    map_panel,
     peak_position,
 )
 from app.config import AppConfig
@@ -253,15 +252,48 @@ def test_colour_map_spans_the_jet_range() -> None:
     assert image[-1, -1, 0] > image[-1, -1, 2]  # hot end is red (RGB)
 
 
-def test_chart_range_skips_nan_and_only_grows() -> None:
+def test_chart_range_fits_the_values_shown() -> None:
     from app.plots import y_range
 
-    low, high = y_range([np.array([np.nan, 0.2, 0.5]), np.array([np.nan, np.nan])], None)
-    assert low <= 0.2 and high >= 0.5 and high - low < 1.0
-    assert y_range([np.array([0.3])], (low, high)) == (low, high)  # inside: unchanged
-    grown = y_range([np.array([2.0])], (low, high))
-    assert grown[0] <= low and grown[1] >= 2.0
-    assert y_range([np.array([np.nan])], None) == (-0.1, 1.1)  # nothing finite yet
+    low, high = y_range([np.array([np.nan, 0.02, 0.1]), np.array([np.nan, np.nan])])
+    assert 0.0 <= low <= 0.02 and 0.1 <= high <= 0.12  # peaks of 0.02-0.1 fill the chart
+    assert y_range([np.array([2.0, 3.0])])[0] > 1.0  # shrinks and moves with the data
+    assert y_range([np.array([np.nan])]) == (0.0, 1.0)  # nothing finite yet
+
+
+def test_the_eta_chart_is_logarithmic_and_always_holds_phi() -> None:
+    from app.plots import log_range
+
+    low, high = log_range([np.array([0.01, 0.05, 370.0, np.inf, np.nan, 0.0])], 0.3)
+    assert (low, high) == (0.01, 1000.0)  # whole decades; inf and 0 left out
+    assert log_range([np.array([0.01, 0.02])], 0.3) == (0.01, 1.0)  # phi above the data
+    assert log_range([np.array([np.nan])], 0.3) == (0.1, 1.0)
+
+
+def test_the_cursor_line_stands_at_the_current_frame() -> None:
+    from app.plots import CURSOR_OFFSETS, with_cursor
+
+    x, values, line = with_cursor(5, [np.arange(5, dtype=float) * 10], 2, (-1.0, 7.0))
+    assert np.all(np.diff(x) > 0) and len(x) == 5 + len(CURSOR_OFFSETS)
+    at = np.flatnonzero(np.isfinite(line))
+    np.testing.assert_allclose(x[at], 2 + np.array(CURSOR_OFFSETS))
+    np.testing.assert_array_equal(line[at], [-1.0, 7.0])
+    np.testing.assert_array_equal(values[at], [20.0, 20.0])  # the series do not break there
+    np.testing.assert_array_equal(values[np.isin(x, np.arange(5))], np.arange(5) * 10.0)
+
+
+def test_local_variation_colour_scale_ignores_a_few_extreme_values() -> None:
+    from app.canvas import colour_map, map_tile, robust_limits
+
+    rng = np.random.default_rng(0)
+    variation = rng.uniform(0.0, 1.0, (40, 40)).astype(np.float32)
+    variation[3, 4], variation[10, 10] = 1e6, np.inf  # divisions by a near-zero response
+    low, high = robust_limits(variation)
+    assert 0.0 <= low < 0.05 and 0.95 < high <= 1.0
+    spread = colour_map(variation, (low, high)).reshape(-1, 3)
+    assert len(np.unique(spread, axis=0)) > 50  # not one hot pixel on a flat blue
+    tile = map_tile(variation, "local variation", "robust")
+    assert tile.shape == (18 + 160 + 26, 160, 3)
 
 
 def test_trajectory_has_a_gap_where_poses_are_missing() -> None:
@@ -449,17 +481,26 @@ def test_playing_tracks_every_target_and_estimates_poses(studio) -> None:
     display = tab.display
     _wait_for(lambda: display.view3d.segments_sent >= last - 1)
     _wait_for(lambda: display.stats.overlay_maps > 0 and display.stats.canvas_frames > 0)
-    _wait_for(lambda: (data := display.plots.data_of(0)) is not None and len(data[0]) == last + 1)
-
-
-def _expected_map_panel(result) -> np.ndarray:
-    gap = np.full((160, 4, 3), 255, np.uint8)
-    return np.concatenate(
-        [map_panel(result.response_map), gap, map_panel(result.local_variation)], axis=1
+    _wait_for(lambda: (data := display.plots.data_of(0)) is not None and len(data[0]) == last + 3)
+    peaks = np.concatenate([t.signals["peak_score"][1 : last + 1] for t in run.targets.values()])
+    low, high = display.plots.y_scale_of(0)["range"]
+    assert low <= peaks.min() and peaks.max() <= high and high - low < 2 * np.ptp(peaks) + 0.05
+    eta_scale = display.plots.y_scale_of(1)
+    assert (
+        eta_scale["distr"] == 3 and eta_scale["range"][0] < run.params.phi < eta_scale["range"][1]
     )
 
 
-def test_map_panels_show_each_targets_own_response_and_local_variation(studio) -> None:
+def _tiles(run, target_id: str, frame_index: int) -> list[np.ndarray | None]:
+    """What the 2 x 2 map panel shows, in its order: previous response, response, local
+    variation, ASR weights."""
+    target = run.targets[target_id]
+    result = target.results[frame_index]
+    previous = target.results[frame_index - 1].response_map
+    return [previous, result.response_map, result.local_variation, result.spatial_window]
+
+
+def test_map_panels_show_each_targets_own_maps_and_asr_weights(studio) -> None:
     tab, _ = _open_tab(studio)
     _draw_demo_boxes(tab)
     _set(tab.panels.playback.frame, 4)  # local variation exists from the third frame on
@@ -468,30 +509,29 @@ def test_map_panels_show_each_targets_own_response_and_local_variation(studio) -
     assert tab.wait_idle()
 
     run = tab.controller.run
-    results = {target_id: target.results[3] for target_id, target in run.targets.items()}
     panels = tab.display.map_panels
-
-    def showing_frame_4() -> bool:
-        shown = panels.shown()
-        return set(shown) == set(results) and all(
-            np.array_equal(shown[target_id], _expected_map_panel(result))
-            for target_id, result in results.items()
-        )
-
-    _wait_for(showing_frame_4)
+    _wait_for(lambda: set(panels.shown()) == set(run.targets))
     assert tab.panels.display.maps_folder.visible
     shown = panels.shown()
     assert not np.array_equal(shown["T1"], shown["T2"])  # each target's own maps
-    for target_id, result in results.items():
-        # Independently of map_panel: the hottest cell of each map is drawn red (JET's top),
-        # the coldest blue, at the place the cell covers in its half of the panel.
-        for half, values in enumerate((result.response_map, result.local_variation)):
+    for target_id in run.targets:
+        tiles = _tiles(run, target_id, 3)
+        assert all(values is not None for values in tiles), target_id
+        weights = tiles[3]
+        assert weights.min() < run.params.reg_window_min * 10  # ASR: small inside the target
+        assert not np.array_equal(tiles[0], tiles[1])
+        for index, values in enumerate(tiles):
+            # Independently of map_tile: the hottest finite cell of each map is drawn red (JET's
+            # top), the coldest blue, where the cell lies in its tile (2 x 2, 160 px bodies
+            # under an 18 px title, 26 px legend, 4 px gaps).
             rows, cols = values.shape
-            image = shown[target_id][:, half * 164 : half * 164 + 160].astype(int)
+            top, left = (index // 2) * (18 + 160 + 26 + 4) + 18, (index % 2) * 164
+            image = shown[target_id][top : top + 160, left : left + 160].astype(int)
+            finite = np.where(np.isfinite(values), values, np.nan)
             for pick, hot in ((np.nanargmax, True), (np.nanargmin, False)):
-                row, col = np.unravel_index(int(pick(values)), values.shape)
+                row, col = np.unravel_index(int(pick(finite)), values.shape)
                 red, _, blue = image[int((row + 0.5) * 160 / rows), int((col + 0.5) * 160 / cols)]
-                assert (red > blue + 64) if hot else (blue > red + 64), (target_id, half, hot)
+                assert (red > blue + 64) if hot else (blue > red + 64), (target_id, index, hot)
 
     _set(tab.panels.display.maps, "off")
     assert tab.wait_idle()
@@ -576,8 +616,7 @@ def test_typed_box_landmark_and_delete_through_the_widgets(studio) -> None:
     _set(targets.box, "10, 20, 30, 40")
     _click(targets.apply_box)
     assert tab.wait_idle()
-    assert run.targets["T5"].results[0].box == (10.0, 20.0, 30.0, 40.0)
-    assert run.targets["T5"].landmark_id is None  # all four landmarks are taken
+    assert "the maximum" in channel.notes[-1][0] and len(run.targets) == 4
 
     _set(targets.draw, "T1")
     assert tab.wait_idle()
@@ -592,12 +631,18 @@ def test_typed_box_landmark_and_delete_through_the_widgets(studio) -> None:
     assert tab.wait_idle()
     assert run.poses[0].valid and len(run.poses[0].used_landmarks) == 4
 
-    _set(targets.draw, "T5")
+    _set(targets.draw, "T4")
     assert tab.wait_idle()
     _click(targets.delete)
     assert tab.wait_idle()
-    assert "T5" not in run.targets and targets.draw.value == "new target"
+    assert "T4" not in run.targets and targets.draw.value == "new target"
     assert targets.delete.disabled
+    _set(targets.box, "10, 20, 30, 40")  # choosing T4 showed its box there
+    _click(targets.apply_box)  # now a new target, and T4 once more
+    assert tab.wait_idle()
+    assert run.targets["T4"].results[0].box == (10.0, 20.0, 30.0, 40.0)
+    # T1 was tied by hand, so three boxes are left to search: too few, D is still to draw
+    assert run.targets["T4"].landmark_id is None and "*to draw*" in targets.table.content
 
     _set(targets.box, "ten, 20, 30")
     _click(targets.apply_box)

@@ -17,8 +17,10 @@ import cv2
 import numpy as np
 import pytest
 
+from app.boxes import format_box, parse_box
 from app.config import AppConfig
-from app.controller import TabController, format_box, parse_box
+from app.controller import TabController
+from app.panels import targets_table
 from app.recordings import RecordingRegistry
 from autotrack.errors import InputError
 
@@ -208,27 +210,86 @@ def test_correcting_a_box_retracks_only_that_target_from_there(controller) -> No
     assert [(e.target_id, e.frame_index) for e in corrections] == [("T2", 5)]
 
 
-def test_landmarks_can_be_reassigned_and_targets_deleted(controller) -> None:
+def test_boxes_drawn_in_any_order_are_tied_by_the_correspondence_search(controller) -> None:
+    boxes = _demo_boxes()
+    order = ["C", "A", "D", "B"]
+    for count, landmark_id in enumerate(order[:3], start=1):
+        controller.place_box(tuple(boxes[landmark_id]))
+        assert len(controller.run.targets) == count
+        assert all(t.landmark_id is None for t in controller.targets())  # not guessed
+        assert "once four boxes are drawn" in controller.message
+    controller.place_box(tuple(boxes[order[3]]))
+
+    run = controller.run
+    assert {tid: t.landmark_id for tid, t in run.targets.items()} == dict(
+        zip(["T1", "T2", "T3", "T4"], order, strict=True)
+    )
+    assignment = controller.ties.last
+    assert assignment.warning == "" and set(assignment.residuals) == set(run.targets)
+    assert max(assignment.residuals.values()) < 2.0  # px, the boxes' centres on the render
+    assert "correspondence search" in controller.message and run.poses[0].valid
+    table = targets_table(controller)
+    assert "**A** red and white rings → T2" in table and "px |" in table
+
+
+def test_landmarks_still_to_draw_are_listed_before_drawing(controller) -> None:
+    table = targets_table(controller)
+    for landmark in controller.run.scene.landmarks:
+        assert f"**{landmark.id}** {landmark.name}" in table
+    assert table.count("*to draw*") == 4
+
+
+def test_an_implausible_assignment_is_flagged_and_ties_are_left_alone(controller) -> None:
+    boxes = _demo_boxes()
+    for landmark_id in ("A", "B", "C"):
+        controller.place_box(tuple(boxes[landmark_id]))
+    controller.place_box((20.0, 450.0, 40.0, 40.0))  # no landmark projects there
+
+    assert all(t.landmark_id is None for t in controller.targets())
+    assert "Implausible" in controller.ties.last.warning
+    assert "Implausible" in controller.message and "Implausible" in targets_table(controller)
+
+
+def test_a_tie_can_be_overridden_by_hand_and_the_search_keeps_it(controller) -> None:
     _draw_demo_boxes(controller)
     run = controller.run
-    controller.place_box((10.0, 20.0, 30.0, 40.0))
-    assert run.targets["T5"].landmark_id is None  # all four landmarks are taken
-
+    first, second = run.targets["T1"].landmark_id, run.targets["T2"].landmark_id
     controller.select("T1")
-    landmark = run.targets["T1"].landmark_id
+    controller.assign_landmark(second)  # T2 holds it: the two swap
+    assert run.targets["T1"].landmark_id == second and run.targets["T2"].landmark_id == first
+    assert controller.ties.manual == {"T1", "T2"} and "by hand" in controller.message
     controller.assign_landmark(None)
     assert run.targets["T1"].landmark_id is None
-    assert landmark not in run.poses[0].used_landmarks
-    controller.assign_landmark(landmark)
-    assert run.poses[0].valid and len(run.poses[0].used_landmarks) == 4
+    assert second not in run.poses[0].used_landmarks
 
-    controller.select("T5")
+
+def test_a_box_on_an_existing_target_corrects_it_instead_of_stacking(controller) -> None:
+    boxes = _demo_boxes()
+    _draw_demo_boxes(controller)
+    run = controller.run
+    x, y, w, h = boxes["A"]
+    target_a = next(t.id for t in controller.targets() if t.landmark_id == "A")
+    controller.place_box((x + 3.0, y + 2.0, w, h))  # IoU ~0.8 with A's box
+    assert len(run.targets) == 4 and "lies on it" in controller.message
+    assert run.targets[target_a].results[0].box[0] == pytest.approx(x + 3.0, abs=2.0)
+
+
+def test_targets_are_capped_and_ids_are_reused(controller) -> None:
+    _draw_demo_boxes(controller)
+    run = controller.run
+    with pytest.raises(InputError, match="the maximum"):
+        controller.place_box((10.0, 20.0, 30.0, 40.0))
+    controller.select("T2")
+    landmark = run.targets["T2"].landmark_id
     controller.delete_selected()
-    assert "T5" not in run.targets and controller.selected is None
+    assert "T2" not in run.targets and controller.selected is None
     with pytest.raises(InputError, match="choose the target"):
         controller.delete_selected()
     with pytest.raises(InputError, match="no target"):
-        controller.select("T5")
+        controller.select("T2")
+    controller.place_box(tuple(_demo_boxes()[landmark]))
+    assert sorted(run.targets) == ["T1", "T2", "T3", "T4"]  # T2 again, not T5
+    assert run.targets["T2"].landmark_id == landmark  # the search tied it again
 
 
 def test_exports_hold_what_the_session_recorded(controller) -> None:

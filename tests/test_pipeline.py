@@ -59,6 +59,35 @@ def test_targets_are_numbered_whoever_adds_them_and_carry_their_landmark(scene, 
     assert open_session(path).landmark_ids == {"T1": "C", "T2": "A", "T3": "B"}
 
 
+def test_a_deleted_targets_id_is_reused_and_its_old_results_leave_the_recording(
+    scene, tmp_path
+) -> None:
+    from autotrack.cli.session import session_summary
+
+    with _pipeline(scene, tmp_path) as run:
+        run.add_targets(0, {"A": BOXES["A"], "B": BOXES["B"], "C": BOXES["C"]})
+        run.track_to(3)
+        run.delete_target("T2", 3)
+        deleted = open_session(_flushed(run))
+        assert "T2" in deleted.deleted_targets
+        assert set(session_summary(deleted)["targets"]) == set(deleted.exported_targets)
+        assert session_summary(deleted)["deleted_targets"] == ["T2"]
+        again = run.add_target(3, BOXES["D"], "D")
+        run.track_to(5)
+        path = run.session_path
+    assert again == "T2" and sorted(run.targets) == ["T1", "T2", "T3"]
+    session = open_session(path)
+    boxes = session.tracks["T2"]
+    assert not np.isfinite(boxes[:3]).any()  # the deleted T2's frames hold no box
+    assert np.isfinite(boxes[3:6]).all() and session.landmark_ids["T2"] == "D"
+    assert not session.deleted_targets and session_summary(session)["deleted_targets"] == []
+
+
+def _flushed(run: Pipeline) -> Path:
+    run.flush()
+    return run.session_path
+
+
 def test_a_correction_re_tracks_only_that_target_and_the_recording_agrees(scene, tmp_path):
     with _pipeline(scene, tmp_path) as run:
         run.add_targets(0, BOXES)

@@ -55,7 +55,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
 def session_summary(session: Session) -> dict[str, Any]:
     """The figures `session info` prints, as plain JSON-able data."""
     targets = {}
-    for target_id in session.targets:
+    for target_id in session.exported_targets:  # as `export` writes them: deleted ones left out
         boxes = session.tracks[target_id]
         present = np.flatnonzero(np.isfinite(boxes).all(axis=1))
         targets[target_id] = {
@@ -77,6 +77,7 @@ def session_summary(session: Session) -> dict[str, Any]:
         "frames": session.frame_count,
         "last_frame": int(session.frame_indices[-1]) if len(session.frame_indices) else None,
         "targets": targets,
+        "deleted_targets": sorted(session.deleted_targets),
         "poses": {"frames": int(poses.frame_indices.size), "valid": int(poses.valid.sum())},
         "events": dict(Counter(event.kind for event in session.events)),
         "embedded_frames": session.image_count,
@@ -105,7 +106,9 @@ def _format_summary(summary: dict[str, Any]) -> str:
         f"duration  {summary['duration_s']:.2f} s of video, "
         f"{summary['wall_time_span_s']:.2f} s of recording"
     )
-    lines.append(f"targets   {len(summary['targets'])}")
+    deleted = summary["deleted_targets"]
+    gone = f" ({len(deleted)} deleted: {', '.join(deleted)})" if deleted else ""
+    lines.append(f"targets   {len(summary['targets'])}{gone}")
     for target_id, target in summary["targets"].items():
         extent = (
             f"frames {target['first_frame']}-{target['last_frame']}"

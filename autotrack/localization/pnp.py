@@ -168,38 +168,77 @@ def fit_pose(
     return Fit(rvec, tvec, ids, errors, float(np.sqrt(np.mean(errors**2))))
 
 
-def search_correspondences(
+@dataclass(frozen=True)
+class Correspondence:
+    """The best assignment of image points to landmarks, with how well it fits and how close
+    the next best comes (see `rank_correspondences`)."""
+
+    assignment: dict[str, int]
+    """Landmark id -> row of the image points."""
+    errors: dict[str, float]
+    """Landmark id -> reprojection error (px) of its point under the refined pose."""
+    rms: float
+    """RMS of `errors` (px)."""
+    runner_up_rms: float
+    """RMS (px, after refinement) of the best assignment that differs from `assignment`
+    (inf when there is none)."""
+    max_error_px: float
+    """The RMS above which an assignment is implausible."""
+
+    @property
+    def plausible(self) -> bool:
+        """The best assignment reprojects within `max_error_px`."""
+        return self.rms <= self.max_error_px
+
+    @property
+    def ambiguous(self) -> bool:
+        """Another assignment also reprojects within `max_error_px`: the layout (or the boxes)
+        cannot tell them apart."""
+        return self.runner_up_rms <= self.max_error_px
+
+
+def _refined_fit(
+    scene: Scene, chosen: tuple[str, ...], points: np.ndarray, rvec: np.ndarray, tvec: np.ndarray
+) -> Fit:
+    object_points = scene.object_points(chosen)
+    rvec, tvec = refine_pose(scene.camera, object_points, points, rvec, tvec)
+    return fit_pose(scene.camera, chosen, object_points, points, rvec, tvec)
+
+
+def rank_correspondences(
     points_2d: np.ndarray,
     scene: Scene,
     *,
+    landmark_ids: Sequence[str] | None = None,
     max_error_px: float = 5.0,
-) -> dict[str, int]:
+) -> Correspondence | None:
     """Which image point is which landmark, when the assignment is unknown (Faessler et al.).
 
-    For every assignment of the image points to distinct landmarks: P3P on the first three,
-    reproject the remaining landmarks and keep the P3P solution that fits them best; the
-    assignment with the smallest error wins, then its pose is refined on all points. Returns
-    landmark id -> row of `points_2d`, or an empty dict when no assignment reprojects within
-    `max_error_px` (RMS over all points after refinement). A symmetric layout has several
-    equally good answers (scene_warnings flags it); the first found is returned.
+    For every assignment of the image points to distinct landmarks (of `landmark_ids`, default
+    all the scene's): P3P on the first three, reproject the remaining landmarks and keep the
+    P3P solution that fits them best. The two best assignments are refined on all points; the
+    best is returned with its per-landmark errors and the runner-up's RMS. None when no
+    assignment puts the landmarks in front of the camera, or the image triangle is degenerate.
     """
     points = np.asarray(points_2d, dtype=np.float64).reshape(-1, 2)
+    candidates = tuple(scene.landmark_ids if landmark_ids is None else landmark_ids)
     if len(points) < 4:
         raise InputError(
             f"the correspondence search needs at least 4 image points, got {len(points)}"
         )
-    if len(points) > len(scene.landmarks):
+    if len(points) > len(candidates):
         raise InputError(
-            f"{len(points)} image points but the scene has only {len(scene.landmarks)} landmarks"
+            f"{len(points)} image points but only {len(candidates)} landmarks to assign them to"
         )
     camera = scene.camera
-    best: tuple[float, tuple[str, ...], np.ndarray, np.ndarray] | None = None
-    for chosen in itertools.permutations(scene.landmark_ids, len(points)):
+    ranked: list[tuple[float, tuple[str, ...], np.ndarray, np.ndarray]] = []
+    for chosen in itertools.permutations(candidates, len(points)):
         object_points = scene.object_points(chosen)
         try:
             solutions = p3p_solutions(camera, object_points[:3], points[:3])
         except cv2.error:  # degenerate image triangle
-            return {}
+            return None
+        best: tuple[float, tuple[str, ...], np.ndarray, np.ndarray] | None = None
         for rvec, tvec in solutions:
             if not in_front(object_points, rvec, tvec, 0.0):
                 continue
@@ -207,15 +246,39 @@ def search_correspondences(
             error = float(np.sqrt(np.mean(np.sum((projected - points[3:]) ** 2, axis=1))))
             if best is None or error < best[0]:
                 best = (error, chosen, rvec, tvec)
-    if best is None:
+        if best is not None:
+            ranked.append(best)
+    if not ranked:
+        return None
+    ranked.sort(key=lambda entry: entry[0])
+    fits = sorted(
+        (_refined_fit(scene, chosen, points, rvec, tvec) for _, chosen, rvec, tvec in ranked[:2]),
+        key=lambda fit: fit.rms,
+    )
+    best_fit = fits[0]
+    return Correspondence(
+        assignment={landmark_id: row for row, landmark_id in enumerate(best_fit.ids)},
+        errors={lid: float(e) for lid, e in zip(best_fit.ids, best_fit.errors, strict=True)},
+        rms=best_fit.rms,
+        runner_up_rms=fits[1].rms if len(fits) > 1 else math.inf,
+        max_error_px=max_error_px,
+    )
+
+
+def search_correspondences(
+    points_2d: np.ndarray,
+    scene: Scene,
+    *,
+    max_error_px: float = 5.0,
+) -> dict[str, int]:
+    """Landmark id -> row of `points_2d` by `rank_correspondences`, or an empty dict when no
+    assignment reprojects within `max_error_px` (RMS over all points after refinement). A
+    symmetric layout has several equally good answers (scene_warnings flags it); the best
+    found is returned."""
+    found = rank_correspondences(points_2d, scene, max_error_px=max_error_px)
+    if found is None or not found.plausible:
         return {}
-    _, chosen, rvec, tvec = best
-    object_points = scene.object_points(chosen)
-    rvec, tvec = refine_pose(camera, object_points, points, rvec, tvec)
-    fit = fit_pose(camera, chosen, object_points, points, rvec, tvec)
-    if fit.rms > max_error_px:
-        return {}
-    return {landmark_id: row for row, landmark_id in enumerate(chosen)}
+    return found.assignment
 
 
 def in_front(object_points: np.ndarray, rvec: np.ndarray, tvec: np.ndarray, min_depth: float):

@@ -5,7 +5,8 @@ frame they are given, the localiser only for the points it is given, and the rec
 what the pipeline hands it. The command line (`track`, `localize`), `localize_sequence`, the
 benchmark scripts and the app all drive this one class.
 
-Targets are named "T1", "T2", ... in the order they are added, whatever the caller; a target
+Targets are named "T1", "T2", ... in the order they are added, whatever the caller (a deleted
+target's number is given to the next new one, so ids stay T1..Tn); a target
 that localises a scene landmark carries its id (`landmark_id`). Editing a box at an earlier
 frame re-tracks only that target from there; the other targets keep their results and filters.
 """
@@ -27,7 +28,7 @@ from autotrack.localization.scene import Scene
 from autotrack.params import TrackerParams
 from autotrack.pipeline.groups import TrackerGroups
 from autotrack.pipeline.recording import Recording, open_recorder
-from autotrack.pipeline.targets import SIGNAL_NAMES, FrameOutcome, TrackedTarget
+from autotrack.pipeline.targets import SIGNAL_NAMES, FrameOutcome, TrackedTarget, free_numbers
 from autotrack.result import PoseEstimate, TrackResult
 from autotrack.sessions import Session, SessionRecorder
 from autotrack.tracker.tracker import validate_box
@@ -84,7 +85,6 @@ class Pipeline:
             None if scene is None else Localizer(scene, localizer_params or LocalizerParams())
         )
         self._last_pose_frame = -1
-        self._next_number = 1
         self._frame_cache = FrameCache(frames, FRAME_CACHE)
         self._recorder: SessionRecorder | None = None
         self._embedded: set[int] = set()
@@ -212,20 +212,20 @@ class Pipeline:
             raise InputError("each landmark can be tracked by one target only")
         for _, landmark in entries:
             self._check_landmark(landmark, None)
+        numbers = free_numbers({t.number for t in self.targets.values()}, len(entries))
         boxes = {
-            f"T{self._next_number + k}": self._checked_box(box, frame_index)
-            for k, (box, _) in enumerate(entries)
+            f"T{number}": self._checked_box(box, frame_index)
+            for number, (box, _) in zip(numbers, entries, strict=True)
         }
         results = self._timed_start(frame_index, boxes)
         self._embed_frame(frame_index)
-        for target_id, (_, landmark) in zip(boxes, entries, strict=True):
+        for number, target_id, (_, landmark) in zip(numbers, boxes, entries, strict=True):
             self.targets[target_id] = TrackedTarget(
                 id=target_id,
-                number=self._next_number,
+                number=number,
                 landmark_id=landmark,
                 signals={name: np.full(self.frame_count, np.nan) for name in SIGNAL_NAMES},
             )
-            self._next_number += 1
             self._store(self.targets[target_id], results[target_id])
         self._forget_poses_from(frame_index)
         self._estimate_pose(frame_index)
@@ -253,6 +253,11 @@ class Pipeline:
         target = self._target(target_id)
         self._groups.remove(target_id)
         first = min(target.results, default=frame_index)
+        recorder = self._recorder_or_none()
+        if recorder is not None:
+            # "No result" records: a new target given this id later starts clean.
+            for index in sorted(target.results):
+                recorder.log_no_result(target_id, index, landmark_id=None)
         del self.targets[target_id]
         self._forget_poses_from(first)
         self._log_event("box_deleted", frame_index, target_id)
@@ -422,7 +427,6 @@ class Pipeline:
                 signals={name: np.full(self.frame_count, np.nan) for name in SIGNAL_NAMES},
             )
             self.targets[target_id] = target
-            self._next_number = max(self._next_number, number + 1)
             for frame_index, result in sorted(recorded.results.items()):
                 if frame_index <= recorded.last_box[0]:
                     self._store(target, result)

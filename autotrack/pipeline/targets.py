@@ -14,12 +14,24 @@ SIGNAL_NAMES = ("peak_score", "global_variation", "theta_ref", "theta", "aberran
 """Per-target, per-frame numbers kept as arrays over the sequence (for plots)."""
 
 
+def free_numbers(taken: set[int], count: int) -> list[int]:
+    """The `count` smallest positive numbers not in `taken` (a deleted target's number is
+    given again, so ids stay T1..Tn)."""
+    numbers: list[int] = []
+    candidate = 1
+    while len(numbers) < count:
+        if candidate not in taken:
+            numbers.append(candidate)
+        candidate += 1
+    return numbers
+
+
 @dataclass
 class TrackedTarget:
     """One tracked object as the caller defined it, with its results so far."""
 
     id: str
-    """'T1', 'T2', ... in the order the targets were added; never reused within a run."""
+    """'T1', 'T2', ...: the smallest number no live target has when it was added."""
     number: int
     """1, 2, ...: the number in the id."""
     landmark_id: str | None

@@ -156,6 +156,7 @@ class AutoTrack:
             aberrant=False,
             scale_factor=self._relative_scale(),
             search_box=search_box,
+            spatial_window=self.spatial_window,
         )
         self.last_result = result
         return result
@@ -229,6 +230,7 @@ class AutoTrack:
             aberrant=aberrant,
             scale_factor=self._relative_scale(),
             search_box=search_box,
+            spatial_window=None if aberrant else self.spatial_window,
         )
         self.last_result = result
         return result
