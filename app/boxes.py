@@ -8,9 +8,15 @@ from pathlib import Path
 import numpy as np
 
 from autotrack.errors import InputError
+from autotrack.evaluation.metrics import overlaps
 from autotrack.io.tum import read_tum
+from autotrack.pipeline import TrackedTarget
 
 Box = tuple[float, float, float, float]
+
+OVERLAP_CORRECTS = 0.5
+"""A new box overlapping a target's box on the frame by more than this IoU corrects that target
+instead of stacking a new one on it."""
 
 
 def parse_box(text: str) -> Box:
@@ -39,3 +45,15 @@ def ground_truth_positions(scene_path: Path | None) -> np.ndarray | None:
         return None
     _stamps, positions, _quaternions = read_tum(tum)
     return positions
+
+
+def overlapped_target(targets: list[TrackedTarget], frame_index: int, box: Box) -> str | None:
+    """The target whose box on `frame_index` the new `box` overlaps most, if by more than
+    OVERLAP_CORRECTS (IoU)."""
+    shown = [t for t in targets if frame_index in t.results]
+    if not shown:
+        return None
+    boxes = np.array([t.results[frame_index].box for t in shown])
+    ious = overlaps(np.repeat(np.array([box]), len(shown), axis=0), boxes)
+    best = int(np.argmax(ious))
+    return shown[best].id if ious[best] > OVERLAP_CORRECTS else None

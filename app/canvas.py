@@ -31,6 +31,10 @@ TARGET_COLOURS: tuple[tuple[int, int, int], ...] = (
 """RGB colour of target number i (cycled)."""
 
 
+TRUTH = (255, 255, 255)
+"""Colour of the ground-truth box."""
+
+
 def target_colour(index: int) -> tuple[int, int, int]:
     """RGB colour of the target at position `index` in the target list."""
     return TARGET_COLOURS[index % len(TARGET_COLOURS)]
@@ -283,11 +287,13 @@ def draw_overlays(
     map_kind: str,
     max_width: int | None = None,
     map_opacity: float = 0.7,
+    truth_box: Box | None = None,
 ) -> np.ndarray:
     """The frame, scaled down to at most `max_width` pixels, with each target's box, label and
     response peak drawn, and its response map ('response') or local variation map
-    ('local_variation') blended over its search region. An aberrant frame gets a red outer box
-    and the word ABERRANT. The input frame is not modified."""
+    ('local_variation') blended over its search region, and `truth_box` (the ground truth) in
+    white. An aberrant frame gets a red outer box and the word ABERRANT. The input frame is not
+    modified."""
     rgb = as_rgb(frame)
     scale = 1.0
     if max_width is not None and rgb.shape[1] > max_width:
@@ -314,6 +320,8 @@ def draw_overlays(
             legend = limits or legend
         if legend is not None:
             _legend_on(canvas, legend)
+    if truth_box is not None:
+        _truth_on(canvas, scaled(truth_box), line)
     for target in targets:
         x, y, w, h = scaled(target.box)
         top_left = (round(x), round(y))
@@ -353,6 +361,14 @@ def draw_overlays(
             cv2.LINE_AA,
         )
     return canvas
+
+
+def _truth_on(canvas: np.ndarray, box: Box, line: int) -> None:
+    """The ground-truth box, white, labelled GT under it, in place."""
+    x, y, w, h = box
+    cv2.rectangle(canvas, (round(x), round(y)), (round(x + w), round(y + h)), TRUTH, line)
+    origin = (round(x), round(y + h) + 14 * line)
+    cv2.putText(canvas, "GT", origin, cv2.FONT_HERSHEY_SIMPLEX, 0.45 * line, TRUTH, line)
 
 
 def _legend_on(canvas: np.ndarray, limits: Limits) -> None:

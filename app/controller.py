@@ -16,14 +16,14 @@ from pathlib import Path
 import numpy as np
 
 from app import exports
-from app.boxes import Box, ground_truth_positions
+from app.boxes import Box, ground_truth_positions, overlapped_target
 from app.config import AppConfig
-from app.landmarks import LandmarkTies
+from app.groundtruth import load_truth, truth_view
+from app.landmarks import LandmarkTies, search_message
 from app.paths import display_name, find_sequences, resolve_user_path, store_upload
 from app.recordings import RecordingRegistry
 from app.views import FrameView, frame_view
 from autotrack.errors import InputError
-from autotrack.evaluation.metrics import overlaps
 from autotrack.io.boxes_json import read_boxes_json
 from autotrack.io.frames import FrameSource, open_frames
 from autotrack.localization.pnp import boxes_by_landmark
@@ -31,10 +31,6 @@ from autotrack.localization.scene import Scene, load_scene
 from autotrack.params import PRESETS, preset
 from autotrack.pipeline import Pipeline, Recording, TrackedTarget
 from autotrack.sessions import open_session
-
-OVERLAP_CORRECTS = 0.5
-"""A new box overlapping a target's box on the frame by more than this IoU corrects that target
-instead of stacking a new one on it."""
 
 EXPORTS = ("tracks", "poses", "mcap")
 """What `export` can build: the tracks zip, the TUM poses, the session file itself."""
@@ -91,6 +87,10 @@ class TabController:
         """The session file this tab writes and has claimed in `recordings`."""
         self.ties = LandmarkTies()
         """Which target is which landmark: the search's last outcome, the hand-chosen ties."""
+        self.truth: np.ndarray | None = None
+        """The sequence's ground-truth boxes (0-based, one row per frame), if it has some."""
+        self.truth_target: str | None = None
+        """The target started from the ground truth (scored against it)."""
         self.play_seconds = np.zeros(0)
         """Per frame: seconds from the previous played frame to this one (NaN: not played)."""
         self._played_at: float | None = None
@@ -216,6 +216,8 @@ class TabController:
         self.selected = None
         self.ties = LandmarkTies()
         self.play_seconds = np.full(run.frame_count, np.nan)
+        self.truth = load_truth(path, run.frame_count)
+        self.truth_target = None
         self.sequences_opened += 1
         scene = run.scene
         landmarks = "" if scene is None else f", scene with {len(scene.landmarks)} landmarks"
@@ -250,7 +252,7 @@ class TabController:
         tied to landmarks by the correspondence search once four boxes are on the frame."""
         run = self.require_run()
         self.stop_playing()
-        target_id = self.selected or self._overlapped(box)
+        target_id = self.selected or overlapped_target(self.targets(), self.cursor, box)
         if target_id is None:
             if len(run.targets) >= self.config.max_targets:
                 raise InputError(
@@ -270,34 +272,40 @@ class TabController:
             )
         self._claim_recording()
 
-    def _overlapped(self, box: Box) -> str | None:
-        """The target whose box on the current frame the new `box` overlaps most, if by more
-        than OVERLAP_CORRECTS."""
-        shown = [t for t in self.targets() if self.cursor in t.results]
-        if not shown:
-            return None
-        boxes = np.array([t.results[self.cursor].box for t in shown])
-        ious = overlaps(np.repeat(np.array([box]), len(shown), axis=0), boxes)
-        best = int(np.argmax(ious))
-        return shown[best].id if ious[best] > OVERLAP_CORRECTS else None
-
     def _search_landmarks(self) -> None:
         """Tie the targets on this frame to landmarks (see LandmarkTies.search) and say how."""
         run = self.require_run()
-        outcome = self.ties.search(run, self.cursor)
-        if outcome is None:
-            free = run.free_landmarks()
-            if run.scene is not None and free:
-                self.message += (
-                    " Landmarks are tied once four boxes are drawn "
-                    f"({len(run.scene.landmarks) - len(free)} tied, {len(free)} to draw)."
-                )
-            return
-        if outcome.warning:
-            self.message += " " + outcome.warning
-            return
-        ties = ", ".join(f"{tid} → {run.targets[tid].landmark_id}" for tid in outcome.target_ids)
-        self.message += f" Landmarks by the correspondence search: {ties}."
+        self.message += search_message(run, self.ties.search(run, self.cursor))
+
+    def start_from_truth(self) -> None:
+        """Start (or restart) the ground-truth target from the current frame's ground-truth
+        box; its live scores are computed against the ground truth."""
+        run = self.require_run()
+        if self.truth is None:
+            raise InputError("this sequence has no groundtruth_rect.txt")
+        row = self.truth[self.cursor]
+        if not (np.isfinite(row).all() and row[2] > 0 and row[3] > 0):
+            raise InputError(f"the ground truth has no box on frame {self.cursor + 1}")
+        self.stop_playing()
+        box = (float(row[0]), float(row[1]), float(row[2]), float(row[3]))
+        if self.truth_target in run.targets:
+            run.place_box(self.truth_target, self.cursor, box)
+        else:
+            if len(run.targets) >= self.config.max_targets:
+                raise InputError("already the maximum number of targets: delete one first")
+            self.truth_target = run.add_target(self.cursor, box, None)
+        self.message = (
+            f"{self.truth_target} started from the ground truth at frame {self.cursor + 1}; "
+            "play to score it (Debugging → Ground truth)."
+        )
+        self._claim_recording()
+
+    def scored_target(self) -> TrackedTarget | None:
+        """The target scored against the ground truth: the one started from it, else T1."""
+        run = self.run
+        if run is None or self.truth is None:
+            return None
+        return run.targets.get(self.truth_target or "T1")
 
     def select(self, target_id: str | None) -> None:
         """Choose the target a drag redraws (None: drags make new targets)."""
@@ -467,7 +475,11 @@ class TabController:
         """Everything the display shows for the current frame (None without a run)."""
         if self.run is None:
             return None
-        return frame_view(self.run, self.cursor, self.selected, self.message, self.play_seconds)
+        truth = self.truth
+        scored = None if truth is None else truth_view(truth, self.cursor, self.scored_target())
+        return frame_view(
+            self.run, self.cursor, self.selected, self.message, self.play_seconds, scored
+        )
 
     def close(self) -> None:
         """Stop playing and close the run (finishing its recording)."""

@@ -29,6 +29,7 @@ from app.canvas import (
 from app.channel import ClientChannel
 from app.panels import CANVAS_3D, CANVAS_FRAME, MAP_KINDS, MAPS_PANELS, Panels
 from app.plots import SignalPlots
+from app.truthplots import TruthPlots
 from app.view3d import SceneView
 from app.views import FrameView
 
@@ -113,10 +114,14 @@ class MapPanels:
         return len(view.drawings)
 
 
-def picture(view: FrameView, maps: str, max_width: int | None) -> np.ndarray:
-    """The view's frame with boxes, labels, peaks and the chosen map drawn."""
+def picture(
+    view: FrameView, maps: str, max_width: int | None, show_truth: bool = False
+) -> np.ndarray:
+    """The view's frame with boxes, labels, peaks, the chosen map and (`show_truth`) the
+    ground-truth box drawn."""
     kind = MAP_KINDS.get(maps, "none")
-    return draw_overlays(view.frame, list(view.drawings.values()), kind, max_width)
+    truth = view.truth.box if show_truth and view.truth is not None else None
+    return draw_overlays(view.frame, list(view.drawings.values()), kind, max_width, truth_box=truth)
 
 
 class DisplayLoop:
@@ -135,6 +140,7 @@ class DisplayLoop:
         self.scene_api = scene_api
         self.channel = channel
         self.plots = SignalPlots(gui, panels.debug.signals)
+        self.truth_plots = TruthPlots(gui, panels.debug.truth)
         self.view3d = SceneView(scene_api)
         self.map_panels = MapPanels(gui, panels.display.maps_folder)
         self.stats = DisplayStats()
@@ -252,7 +258,7 @@ class DisplayLoop:
     ) -> None:
         maps = self.panels.display.maps.value
         if version != shown["video"] and now >= last["video"] + 1.0 / GUI_FPS:
-            self.panels.video.image = picture(view, maps, VIDEO_MAX_WIDTH)
+            self.panels.video.image = picture(view, maps, VIDEO_MAX_WIDTH, self._show_truth())
             self.stats.video_frames += 1
             self.stats.video_times.append(now)
             if maps in MAP_KINDS and any(
@@ -279,13 +285,18 @@ class DisplayLoop:
         # Drawn at full size and padded in frame pixels, then scaled as a whole: canvas
         # fractions map to frame pixels exactly through `letterbox`.
         image = letterbox_image(
-            picture(view, maps, None), letterbox, min(CANVAS_MAX_WIDTH, max(size[0], 320))
+            picture(view, maps, None, self._show_truth()),
+            letterbox,
+            min(CANVAS_MAX_WIDTH, max(size[0], 320)),
         )
         self.scene_api.set_background_image(image, format="jpeg", jpeg_quality=80)
         self.letterbox = letterbox
         self._canvas_dirty = False
         self.stats.canvas_frames += 1
         self.stats.canvas_times.append(time.monotonic())
+
+    def _show_truth(self) -> bool:
+        return bool(self.panels.targets.show_truth.value)
 
     def _show_canvas_mode(self, mode: str) -> None:
         if mode == CANVAS_3D:
@@ -298,6 +309,7 @@ class DisplayLoop:
     def _send_slow(self, view: FrameView, maps: str) -> None:
         self.panels.quiet.set(self.panels.status, "content", view.status)
         self.plots.update(view.history, view.frame_index)
+        self.truth_plots.update(view.truth, view.frame_index)
         self.stats.plot_updates += 1
         if view.pose_view is not None:
             self.view3d.update(view.pose_view, thumbnail(view.frame))

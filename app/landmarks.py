@@ -126,3 +126,17 @@ class LandmarkTies:
         run.assign_landmark(holder.id, previous, frame_index)
         self.manual.add(holder.id)
         return holder.id
+
+
+def search_message(run: Pipeline, outcome: Assignment | None) -> str:
+    """What to tell the user after a search (' ...', to follow the drawing message)."""
+    if outcome is None:
+        free = run.free_landmarks()
+        if run.scene is None or not free:
+            return ""
+        tied = len(run.scene.landmarks) - len(free)
+        return f" Landmarks are tied once four boxes are drawn ({tied} tied, {len(free)} to draw)."
+    if outcome.warning:
+        return " " + outcome.warning
+    ties = ", ".join(f"{tid} → {run.targets[tid].landmark_id}" for tid in outcome.target_ids)
+    return f" Landmarks by the correspondence search: {ties}."

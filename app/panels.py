@@ -107,6 +107,8 @@ class TargetsPanel:
     apply_box: viser.GuiButtonHandle
     delete: viser.GuiButtonHandle
     boxes_json: viser.GuiButtonHandle
+    show_truth: viser.GuiCheckboxHandle
+    from_truth: viser.GuiButtonHandle
 
 
 def _targets_panel(gui: viser.GuiApi) -> TargetsPanel:
@@ -121,6 +123,8 @@ def _targets_panel(gui: viser.GuiApi) -> TargetsPanel:
             apply_box=gui.add_button("Apply typed box"),
             delete=gui.add_button("Delete target", color="red"),
             boxes_json=gui.add_button("Load boxes.json", visible=False),
+            show_truth=gui.add_checkbox("Show ground truth", False, visible=False),
+            from_truth=gui.add_button("Start from ground truth", visible=False),
         )
 
 
@@ -337,6 +341,8 @@ def show_targets(panels: Panels, controller: TabController) -> None:
     quiet.set(widgets.landmark, "disabled", chosen is None)
     quiet.set(widgets.delete, "disabled", chosen is None)
     quiet.set(widgets.boxes_json, "visible", controller.boxes_path is not None)
+    quiet.set(widgets.show_truth, "visible", controller.truth is not None)
+    quiet.set(widgets.from_truth, "visible", controller.truth is not None)
     if chosen is not None and controller.cursor in chosen.results:
         quiet.set(widgets.box, "value", format_box(chosen.results[controller.cursor].box))
     quiet.set(widgets.table, "content", targets_table(controller))

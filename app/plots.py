@@ -26,6 +26,8 @@ CURSOR_OFFSETS = (1e-3, 2e-3)
 """Where, after the current frame's x, the two points of the cursor line sit (frames)."""
 X_STEP = 50
 """The x axis ends at the next multiple of this many frames past the data shown."""
+CHART_PADDING = (12, 12, 0, 0)
+"""Space (top, right, bottom, left; CSS px) around a chart so its top tick label is not cut."""
 CHART_TITLES = ("Peak score", "Global variation η (log) vs φ", "θ_ref (dots) and θ", "Speed")
 
 
@@ -85,7 +87,9 @@ def _css(colour: tuple[int, int, int]) -> str:
     return "#{:02x}{:02x}{:02x}".format(*colour)
 
 
-def _line(label: str, colour: str, dash: tuple[float, ...] | None = None) -> viser.uplot.Series:
+def line_series(
+    label: str, colour: str, dash: tuple[float, ...] | None = None
+) -> viser.uplot.Series:
     series = viser.uplot.Series(label=label, stroke=colour, width=1.5)
     if dash is not None:
         series["dash"] = dash
@@ -101,8 +105,8 @@ def _points(label: str, colour: str, size: float) -> viser.uplot.Series:
     )
 
 
-def _cursor() -> viser.uplot.Series:
-    return viser.uplot.Series(label="frame", stroke=CURSOR_COLOUR, width=1.0)
+def cursor_series() -> viser.uplot.Series:
+    return viser.uplot.Series(label="now", stroke=CURSOR_COLOUR, width=1.0)
 
 
 def _aberrant_values(history: SignalHistory, signal: str, count: int) -> np.ndarray:
@@ -160,16 +164,16 @@ class SignalPlots:
         pairs = list(zip(history.target_ids, colours, strict=True))
         theta: list[viser.uplot.Series] = []
         for tid, colour in pairs:
-            theta += [_points(f"{tid} θref", colour, 4), _line(f"{tid} θ", colour)]
+            theta += [_points(f"{tid} θref", colour, 4), line_series(f"{tid} θ", colour)]
         series = (
-            [*(_line(tid, c) for tid, c in pairs), _points("aberrant", ABERRANT_COLOUR, 7)],
+            [*(line_series(tid, c) for tid, c in pairs), _points("aberrant", ABERRANT_COLOUR, 7)],
             [
-                *(_line(f"{tid} η", c) for tid, c in pairs),
-                _line("φ", "#868e96", dash=(6.0, 4.0)),
+                *(line_series(f"{tid} η", c) for tid, c in pairs),
+                line_series("φ", "#868e96", dash=(6.0, 4.0)),
                 _points("aberrant", ABERRANT_COLOUR, 7),
             ],
             theta,
-            [_line("trackers fps", "#1971c2"), _line("in-app fps", "#2f9e44")],
+            [line_series("trackers fps", "#1971c2"), line_series("in-app fps", "#2f9e44")],
         )
         handles = []
         with self._container:
@@ -178,9 +182,10 @@ class SignalPlots:
                 handles.append(
                     self.gui.add_uplot(
                         data=(empty, *[empty] * (len(chart) + 1)),
-                        series=(viser.uplot.Series(label="frame"), *chart, _cursor()),
+                        series=(viser.uplot.Series(label="frame"), *chart, cursor_series()),
                         title=title,
                         aspect=2.0,
+                        padding=CHART_PADDING,
                     )
                 )
         self._handles = handles

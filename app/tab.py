@@ -102,6 +102,8 @@ class Tab:
         targets.apply_box.on_click(lambda _: submit(self.place_typed_box, targets.box.value))
         targets.delete.on_click(lambda _: submit(controller.delete_selected))
         targets.boxes_json.on_click(lambda _: submit(controller.load_boxes_json))
+        targets.from_truth.on_click(lambda _: submit(controller.start_from_truth))
+        targets.show_truth.on_update(edit(lambda: submit(self.display.wake, canvas=True)))
         playback.play.on_click(lambda _: submit(controller.toggle_play))
         playback.step_back.on_click(lambda _: submit(controller.step, -1))
         playback.step.on_click(lambda _: submit(controller.step, 1))

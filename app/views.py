@@ -12,6 +12,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from app.canvas import TargetDrawing, target_colour
+from app.groundtruth import TruthView
 from autotrack.pipeline import Pipeline
 from autotrack.result import PoseEstimate
 
@@ -62,6 +63,8 @@ class FrameView:
     history: SignalHistory
     status: str
     """The status line (markdown)."""
+    truth: TruthView | None = None
+    """The ground truth and the live scores against it (None: the sequence has none)."""
 
 
 def frame_view(
@@ -70,6 +73,7 @@ def frame_view(
     selected: str | None,
     message: str,
     play_seconds: np.ndarray | None = None,
+    truth: TruthView | None = None,
 ) -> FrameView:
     """The snapshot of `run` at `frame_index` (`selected`: the target drawn thicker;
     `message`: the tab's last message, under the status line; `play_seconds`: the in-app time
@@ -121,6 +125,7 @@ def frame_view(
             message,
             rates_text(run.frame_seconds, play_seconds, frame_index),
         ),
+        truth=truth,
     )
 
 

@@ -35,7 +35,11 @@ CHROMIUM_FLAGS = [
 VIEWPORT = {"width": 1600, "height": 1000}
 PLAY_FRAMES = 30
 CHARTS_JS = """() => Object.values(window.__viserTestpoints?.uplots ?? {}).map((entry) => ({
-    frames: entry.chart.data[0].length, x_max: entry.chart.scales.x.max}))"""
+    frames: entry.chart.data[0].length, x_max: entry.chart.scales.x.max,
+    y_min: entry.chart.scales.y.min, y_max: entry.chart.scales.y.max,
+    labels: entry.chart.series.map((s) => s.label)}))"""
+SHUFFLED = ("C", "A", "D", "B")
+"""The order the test draws the demo's landmarks in (not the scene's)."""
 
 
 def _wait_for(predicate, timeout: float = 60.0, what: str = "condition", tab=None) -> None:
@@ -83,6 +87,7 @@ def test_draw_play_inspect_and_download_in_chromium(studio, tmp_path: Path) -> N
     from playwright.sync_api import sync_playwright
 
     from app.panels import CANVAS_3D
+    from app.plots import x_range
     from autotrack.sessions import open_session
 
     ARTIFACTS.mkdir(exist_ok=True)
@@ -120,8 +125,7 @@ def test_draw_play_inspect_and_download_in_chromium(studio, tmp_path: Path) -> N
                 u, v = letterbox.frame_to_screen(x, y)
                 return (canvas["x"] + u * canvas["width"], canvas["y"] + v * canvas["height"])
 
-            landmark_order = controller.run.scene.landmark_ids
-            for count, landmark_id in enumerate(landmark_order, start=1):
+            for count, landmark_id in enumerate(SHUFFLED, start=1):
                 x, y, w, h = boxes[landmark_id]
                 _shift_drag(page, page_point(x, y), page_point(x + w, y + h))
                 _wait_for(
@@ -130,6 +134,10 @@ def test_draw_play_inspect_and_download_in_chromium(studio, tmp_path: Path) -> N
             assert tab.wait_idle()
             run = controller.run
             assert controller.cursor == 0  # all four drawn on frame 1
+            # Tied by the correspondence search, whatever the drawing order.
+            assert [t.landmark_id for t in run.targets.values()] == list(SHUFFLED)
+            assert controller.ties.last.warning == ""
+            _wait_for(lambda: "px |" in tab.panels.targets.table.content, what="the residuals")
             for target in run.targets.values():
                 drawn = target.results[0].box
                 np.testing.assert_allclose(drawn, boxes[target.landmark_id], atol=2.0)
@@ -168,16 +176,23 @@ def test_draw_play_inspect_and_download_in_chromium(studio, tmp_path: Path) -> N
             assert sum(pose.valid for pose in run.poses.values()) > PLAY_FRAMES // 2
             # The four charts were drawn in the page with every tracked frame (viser's uPlot
             # component registers each chart under window.__viserTestpoints).
+            # (+2: the two x points of the current-frame line)
             _wait_for(
-                lambda: sorted(row["frames"] for row in page.evaluate(CHARTS_JS)) == [last + 1] * 4,
+                lambda: sorted(row["frames"] for row in page.evaluate(CHARTS_JS)) == [last + 3] * 4,
                 what="four charts with every frame",
                 tab=tab,
             )
-            assert all(row["x_max"] == run.frame_count - 1 for row in page.evaluate(CHARTS_JS))
+            charts = {row["labels"][1]: row for row in page.evaluate(CHARTS_JS)}
+            assert all(row["x_max"] == x_range(last, run.frame_count)[1] for row in charts.values())
+            peaks = np.concatenate(
+                [t.signals["peak_score"][1 : last + 1] for t in run.targets.values()]
+            )
+            peak_chart = charts["T1"]  # fitted to the peaks, not (-0.1, 1.1)
+            assert peak_chart["y_min"] <= peaks.min() and peaks.max() <= peak_chart["y_max"]
+            assert peak_chart["y_max"] - peak_chart["y_min"] < 2 * np.ptp(peaks) + 0.05
+            eta_chart = charts["T1 η"]  # log scale holding the threshold φ
+            assert eta_chart["y_min"] < run.params.phi < eta_chart["y_max"]
             page.screenshot(path=str(ARTIFACTS / "app-after-30-frames.png"))
-            page.get_by_text("Tracking speed (frames/s)").scroll_into_view_if_needed()
-            time.sleep(0.5)
-            page.screenshot(path=str(ARTIFACTS / "app-plots.png"))
 
             page.get_by_label("Canvas", exact=True).click()
             page.get_by_role("option", name=CANVAS_3D).click()
@@ -219,6 +234,7 @@ def test_draw_play_inspect_and_download_in_chromium(studio, tmp_path: Path) -> N
     assert len(tum_lines) == sum(pose.valid for pose in run.poses.values())
     session = open_session(saved["Download session (MCAP)"])
     assert session.targets == ("T1", "T2", "T3", "T4")
+    assert [session.landmark_ids[t] for t in session.targets] == list(SHUFFLED)
     for target_id in session.targets:
         landmark_id = session.landmark_ids[target_id]
         np.testing.assert_allclose(session.tracks[target_id][0], boxes[landmark_id], atol=2.0)

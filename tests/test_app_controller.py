@@ -623,3 +623,56 @@ def test_installs_without_the_repo_render_the_same_demo_into_the_cache(tmp_path,
     # Rendered once: a second launch reuses it.
     stamp = (demo / "scene.json").stat().st_mtime_ns
     assert rendered_demo() == demo and (demo / "scene.json").stat().st_mtime_ns == stamp
+
+
+GULL1 = REPO.parent / "shared" / "data" / "sequences" / "DTB70" / "Gull1"
+SCORED_FRAMES = 16
+
+
+def _first_frames(sequence: Path, folder: Path, count: int) -> Path:
+    """The first `count` frames of a benchmark sequence with their ground truth (links)."""
+    (folder / "img").mkdir(parents=True)
+    for image in sorted((sequence / "img").iterdir())[:count]:
+        (folder / "img" / image.name).symlink_to(image)
+    rows = (sequence / "groundtruth_rect.txt").read_text().splitlines()[:count]
+    (folder / "groundtruth_rect.txt").write_text("\n".join(rows) + "\n")
+    return folder
+
+
+def test_start_from_ground_truth_scores_like_the_cli(tmp_path: Path, capsys) -> None:
+    from autotrack.cli import main
+    from autotrack.io.otb_boxes import read_boxes
+
+    if not GULL1.is_dir():
+        pytest.skip(f"{GULL1} is missing (the shared benchmark data)")
+    sequence = _first_frames(GULL1, tmp_path / "Gull1", SCORED_FRAMES)
+    config = AppConfig(
+        sequence=sequence, sessions_dir=tmp_path / "sessions", demo_dir=DEMO, tracker_threads=1
+    )
+    config.sessions_dir.mkdir()
+    controller = TabController(config, (sequence,), RecordingRegistry(), 1)
+    controller.open_initial()
+    try:
+        assert controller.truth is not None and controller.snapshot().truth.frames is None
+        controller.start_from_truth()
+        controller.seek(SCORED_FRAMES - 1)
+        truth = controller.snapshot().truth
+        target = controller.run.targets[truth.target_id]
+        app_boxes = np.array([target.results[k].box for k in range(SCORED_FRAMES)])
+    finally:
+        controller.close()
+
+    out = tmp_path / "cli_boxes.txt"
+    assert main(["track", str(sequence), "--out", str(out), "--quiet"]) == 0
+    printed = capsys.readouterr().out
+    cli_boxes = read_boxes(out)
+    np.testing.assert_allclose(app_boxes, cli_boxes, atol=1e-6)  # the same run
+    assert truth.frames == (0, SCORED_FRAMES - 1)
+    assert f"precision@20px: {truth.precision:.3f}  success AUC: {truth.auc:.3f}" in printed
+    assert np.isfinite(truth.errors[:SCORED_FRAMES]).all() and truth.ious[0] > 0.9
+    assert truth.box == pytest.approx(tuple(read_boxes(sequence / "groundtruth_rect.txt")[-1]))
+
+
+def test_ground_truth_needs_a_box_on_the_frame(controller) -> None:
+    with pytest.raises(InputError, match="no groundtruth_rect.txt"):
+        controller.start_from_truth()  # the demo has none

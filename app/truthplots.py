@@ -1,0 +1,84 @@
+"""The Ground truth tab: the running P@20 and AUC of the target scored against the ground
+truth, and its centre error and overlap per frame (live uPlot charts, the current frame
+marked as on the signal charts)."""
+
+from __future__ import annotations
+
+import numpy as np
+import viser
+import viser.uplot
+
+from app.groundtruth import TruthView
+from app.plots import CHART_PADDING, cursor_series, line_series, with_cursor, x_range
+from autotrack.evaluation.metrics import PRECISION_SCORE_THRESHOLD
+
+
+def scores_text(truth: TruthView | None) -> str:
+    """The scores as the tab shows them (markdown)."""
+    if truth is None:
+        return "This sequence has no ground truth (groundtruth_rect.txt)."
+    if truth.frames is None:
+        return (
+            "No target to score yet: *Targets → Start from ground truth* starts one from this "
+            "frame's ground-truth box (or the first target drawn is scored)."
+        )
+    first, last = truth.frames
+    return (
+        f"**{truth.target_id}** against the ground truth, frames {first + 1}-{last + 1} "
+        f"({last - first + 1} frames): **P@20 = {truth.precision:.3f}**, "
+        f"**AUC = {truth.auc:.3f}** (as `autotrack track` scores the same frames)."
+    )
+
+
+class TruthPlots:
+    """The scores line and the centre-error and IoU charts."""
+
+    def __init__(self, gui: viser.GuiApi, container: viser.GuiTabHandle) -> None:
+        self.gui = gui
+        with container:
+            self.scores = gui.add_markdown(scores_text(None))
+            empty = np.zeros(1)
+            frame = viser.uplot.Series(label="frame")
+            self.error = gui.add_uplot(
+                data=(empty, empty, empty, empty),
+                series=(
+                    frame,
+                    line_series("centre error (px)", "#e8590c"),
+                    line_series("20 px", "#868e96", dash=(6.0, 4.0)),
+                    cursor_series(),
+                ),
+                title="Centre error (px)",
+                aspect=2.0,
+                padding=CHART_PADDING,
+            )
+            self.iou = gui.add_uplot(
+                data=(empty, empty, empty),
+                series=(frame, line_series("IoU", "#1971c2"), cursor_series()),
+                title="Overlap (IoU)",
+                aspect=2.0,
+                padding=CHART_PADDING,
+            )
+        self._scales: tuple | None = None
+        self.last_text = ""
+
+    def update(self, truth: TruthView | None, cursor: int) -> None:
+        """Show `truth`'s scores and per-frame values up to its last scored frame."""
+        text = scores_text(truth)
+        if text != self.last_text:
+            self.scores.content = text
+            self.last_text = text
+        if truth is None or truth.frames is None:
+            return
+        count = max(truth.frames[1], cursor) + 1
+        errors = np.where(np.isfinite(truth.errors[:count]), truth.errors[:count], np.nan)
+        finite = errors[np.isfinite(errors)]
+        top = max(2.0 * PRECISION_SCORE_THRESHOLD, float(finite.max()) * 1.1 if finite.size else 0)
+        x_scale = {"time": False, "auto": False, "range": x_range(count - 1, len(truth.errors))}
+        scales = (x_scale, top)
+        if scales != self._scales:
+            self.error.scales = {"x": x_scale, "y": {"auto": False, "range": (0.0, top)}}
+            self.iou.scales = {"x": x_scale, "y": {"auto": False, "range": (0.0, 1.0)}}
+            self._scales = scales
+        threshold = np.full(count, PRECISION_SCORE_THRESHOLD)
+        self.error.data = with_cursor(count, [errors, threshold], cursor, (0.0, top))
+        self.iou.data = with_cursor(count, [truth.ious[:count]], cursor, (0.0, 1.0))
