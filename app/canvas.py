@@ -279,6 +279,10 @@ class TargetDrawing:
     selected: bool = False
     previous_response: np.ndarray | None = None
     """The target's response map on the frame before (for the map panels)."""
+    weights: np.ndarray | None = None
+    """The ASR spatial weights of the target's filter now (for the map panels)."""
+    weights_frame: int | None = None
+    """The frame the filter was last trained on, with `weights` (0-based)."""
 
 
 def draw_overlays(

@@ -75,11 +75,18 @@ def map_panel_image(view: FrameView, target_id: str) -> np.ndarray:
         map_tile(drawing.previous_response, "previous response"),
         map_tile(None if result is None else result.response_map, "response"),
         map_tile(None if result is None else result.local_variation, "local variation", "robust"),
-        map_tile(None if result is None else result.spatial_window, "ASR weights u", "log"),
+        map_tile(drawing.weights, weights_title(drawing.weights_frame, view.frame_index), "log"),
     )
     gap = np.full((tiles[0].shape[0], 4, 3), 255, np.uint8)
     rows = [np.concatenate([tiles[i], gap, tiles[i + 1]], axis=1) for i in (0, 2)]
     return np.concatenate([rows[0], np.full((4, rows[0].shape[1], 3), 255, np.uint8), rows[1]])
+
+
+def weights_title(trained: int | None, frame_index: int) -> str:
+    """The ASR tile's title: says when the weights are those of an earlier frame's training."""
+    if trained is None or trained == frame_index:
+        return "ASR weights u"
+    return f"ASR u (trained frame {trained + 1})"
 
 
 class MapPanels:

@@ -16,6 +16,7 @@ from app.channel import ClientChannel, ViserClientChannel
 from app.config import AppConfig
 from app.recordings import RecordingRegistry
 from app.tab import Tab
+from autotrack.tracker.tracker import warm_up
 
 
 class StudioServer:
@@ -37,6 +38,9 @@ class StudioServer:
         self.viser.gui.main_panel.dock_right()
         self.viser.on_client_connect(self._connect)
         self.viser.on_client_disconnect(lambda client: self.close_tab(client.client_id))
+        # Compile the tracker's kernels now, so the first box drawn answers at once.
+        self.warm_up = threading.Thread(target=warm_up, name="kernel-warm-up", daemon=True)
+        self.warm_up.start()
 
     @property
     def port(self) -> int:

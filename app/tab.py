@@ -9,6 +9,7 @@ Callbacks here are one line each: they read the widget's value and queue a contr
 
 from __future__ import annotations
 
+import time
 from pathlib import Path
 
 import numpy as np
@@ -29,11 +30,14 @@ from app.panels import (
     show_frame,
     show_opened,
     show_state,
+    show_targets,
 )
 from app.recordings import RecordingRegistry
 from app.worker import Worker
 from autotrack.errors import InputError
 
+TABLE_PERIOD = 0.25
+"""Seconds between Targets-table updates while frames change (playing, tracking ahead)."""
 UP = np.array([0.0, 0.0, 1.0])
 """The 3-D view's up direction (the scenes' world frame has +z up)."""
 
@@ -62,6 +66,7 @@ class Tab:
             self.panels, gui, scene_api, channel, name=f"tab{tab_id}-display"
         )
         self._scene_shown = 0
+        self._table_shown = 0.0
         controller = self.controller
         self.worker = Worker(
             is_playing=lambda: controller.playing,
@@ -102,7 +107,12 @@ class Tab:
         targets.apply_box.on_click(lambda _: submit(self.place_typed_box, targets.box.value))
         targets.delete.on_click(lambda _: submit(controller.delete_selected))
         targets.boxes_json.on_click(lambda _: submit(controller.load_boxes_json))
-        targets.from_truth.on_click(lambda _: submit(controller.start_from_truth))
+        targets.from_truth.on_click(
+            lambda _: (
+                self._busy("starting from the ground truth…"),
+                submit(controller.start_from_truth),
+            )
+        )
         targets.show_truth.on_update(edit(lambda: submit(self.display.wake, canvas=True)))
         playback.play.on_click(lambda _: submit(controller.toggle_play))
         playback.step_back.on_click(lambda _: submit(controller.step, -1))
@@ -132,6 +142,7 @@ class Tab:
         if self.panels.display.canvas.value != CANVAS_FRAME:
             self.worker.submit(self._tell, "switch the canvas to 'frame' to draw boxes")
             return
+        self._busy("drawing the box: starting its tracker…")
         self.worker.submit(self.place_dragged_box, event.screen_min, event.screen_max)
 
     def place_dragged_box(
@@ -190,12 +201,22 @@ class Tab:
 
     def _frame_changed(self) -> None:
         show_frame(self.panels, self.controller)
+        now = time.monotonic()
+        if now >= self._table_shown + TABLE_PERIOD:  # the Targets table follows playback
+            show_targets(self.panels, self.controller)
+            self._table_shown = now
         self._publish()
 
     def _publish(self) -> None:
         view = self.controller.snapshot()
         if view is not None:
             self.display.publish(view)
+
+    def _busy(self, what: str) -> None:
+        """Say at once (on viser's thread) that a command is under way; the status line is
+        rewritten when it is done."""
+        status = self.panels.status
+        self.panels.quiet.set(status, "content", f"⏳ **Working**: {what}\n\n{status.content}")
 
     def _tell(self, message: str) -> None:
         self.controller.message = message

@@ -14,7 +14,7 @@ import numpy as np
 from app.canvas import TargetDrawing, target_colour
 from app.groundtruth import TruthView
 from autotrack.pipeline import Pipeline
-from autotrack.result import PoseEstimate
+from autotrack.result import PoseEstimate, TrackResult
 
 
 @dataclass(frozen=True)
@@ -92,6 +92,7 @@ def frame_view(
             continue
         label = target.id if target.landmark_id is None else f"{target.id}:{target.landmark_id}"
         previous = target.results.get(frame_index - 1)
+        weights_frame = trained_frame(target.results, frame_index)
         drawings[target.id] = TargetDrawing(
             label=label,
             colour=colour,
@@ -99,6 +100,8 @@ def frame_view(
             result=result,
             selected=target.id == selected,
             previous_response=None if previous is None else previous.response_map,
+            weights=None if weights_frame is None else target.results[weights_frame].spatial_window,
+            weights_frame=weights_frame,
         )
     history = SignalHistory(
         target_ids=tuple(run.targets),
@@ -127,6 +130,21 @@ def frame_view(
         ),
         truth=truth,
     )
+
+
+WEIGHTS_LOOKBACK = 100
+"""Frames `trained_frame` looks back for the last training (aberrant frames do not train)."""
+
+
+def trained_frame(results: Mapping[int, TrackResult], frame_index: int) -> int | None:
+    """The last frame at or before `frame_index` whose result carries the spatial weights the
+    filter was trained with (an aberrant frame keeps the filter, and its weights, of the last
+    training), within WEIGHTS_LOOKBACK frames."""
+    for index in range(frame_index, max(-1, frame_index - WEIGHTS_LOOKBACK), -1):
+        result = results.get(index)
+        if result is not None and result.spatial_window is not None:
+            return index
+    return None
 
 
 def _pose_view(run: Pipeline, frame_index: int) -> PoseView | None:

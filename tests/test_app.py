@@ -458,6 +458,30 @@ def test_boxes_json_button_places_the_demo_boxes(studio) -> None:
     assert run.poses[0].valid
 
 
+def _tracked_to(tab, target_id: str) -> int:
+    """The 'tracked to' column of a target's row in the Targets table."""
+    for row in tab.panels.targets.table.content.splitlines():
+        if row.startswith(f"| {target_id} |"):
+            return int(row.strip("| ").split("|")[-1])
+    return 0
+
+
+def test_the_server_compiles_the_tracker_kernels_in_the_background(studio) -> None:
+    studio.warm_up.join(timeout=120)
+    assert not studio.warm_up.is_alive()
+
+
+def test_status_shows_the_in_app_and_trackers_alone_rates() -> None:
+    from app.views import rates_text
+
+    tracked = np.array([np.nan, 0.05, 0.05, 0.05])
+    played = np.array([np.nan, np.nan, 0.1, 0.1])
+    assert rates_text(tracked, played, 3) == (
+        "playing 10.0 frames/s in the app · trackers alone 20.0 frames/s"
+    )
+    assert rates_text(tracked, np.full(4, np.nan), 3) == ""  # nothing played
+
+
 def test_playing_tracks_every_target_and_estimates_poses(studio) -> None:
     tab, _ = _open_tab(studio)
     _draw_demo_boxes(tab)
@@ -467,6 +491,10 @@ def test_playing_tracks_every_target_and_estimates_poses(studio) -> None:
     _click(playback.play)
     _wait_for(lambda: tab.controller.cursor >= 6)
     assert playback.play.label == "Pause"
+    # While playing, the Targets table follows (no command runs to refresh it)
+    _wait_for(lambda: not tab.controller.playing or _tracked_to(tab, "T1") >= 6)
+    assert tab.controller.playing, "the demo ended before the check"
+    _wait_for(lambda: "frames/s in the app" in tab.panels.status.content)
     _click(playback.play)
     assert tab.wait_idle()
 
@@ -497,7 +525,10 @@ def _tiles(run, target_id: str, frame_index: int) -> list[np.ndarray | None]:
     target = run.targets[target_id]
     result = target.results[frame_index]
     previous = target.results[frame_index - 1].response_map
-    return [previous, result.response_map, result.local_variation, result.spatial_window]
+    # an aberrant frame does not train: the filter keeps the weights of its last training
+    trained = max(k for k in range(frame_index + 1) if target.results[k].spatial_window is not None)
+    weights = target.results[trained].spatial_window
+    return [previous, result.response_map, result.local_variation, weights]
 
 
 def test_map_panels_show_each_targets_own_maps_and_asr_weights(studio) -> None:

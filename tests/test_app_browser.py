@@ -247,3 +247,85 @@ def test_draw_play_inspect_and_download_in_chromium(studio, tmp_path: Path) -> N
     rates["largest_drag_error_px"] = float(max(errors))
     (ARTIFACTS / "app-rates.json").write_text(json.dumps(rates, indent=2) + "\n")
     print("\napp rates:", json.dumps(rates))
+
+
+GULL1 = REPO.parent / "shared" / "data" / "sequences" / "DTB70" / "Gull1"
+GT_FRAMES = 16
+
+
+def test_start_from_ground_truth_and_read_the_scores_in_chromium(tmp_path: Path, capsys) -> None:
+    """A benchmark sequence (the first frames of DTB70/Gull1): start from the ground truth,
+    play to the end, read P@20 and AUC on the page and compare them with `autotrack track`."""
+    if not CHROMIUM.exists() or not GULL1.is_dir():
+        pytest.skip("needs /usr/bin/chromium and ../shared/data/sequences/DTB70/Gull1")
+    from playwright.sync_api import sync_playwright
+
+    from app.config import AppConfig
+    from app.panels import MAPS_PANELS, MAPS_VARIATION
+    from app.server import StudioServer
+    from autotrack.cli import main
+    from tests.test_app_controller import _first_frames
+
+    ARTIFACTS.mkdir(exist_ok=True)
+    sequence = _first_frames(GULL1, tmp_path / "Gull1", GT_FRAMES)
+    studio = StudioServer(
+        AppConfig(port=0, sequence=sequence, sessions_dir=tmp_path / "sessions", demo_dir=DEMO)
+    )
+    try:
+        with sync_playwright() as playwright:
+            browser = playwright.chromium.launch_persistent_context(
+                str(tmp_path / "profile"),
+                executable_path=str(CHROMIUM),
+                headless=True,
+                args=CHROMIUM_FLAGS,
+                viewport=VIEWPORT,
+            )
+            try:
+                page = browser.new_page()
+                page.goto(studio.url)
+                _wait_for(lambda: len(studio.tabs) == 1, what="the tab to connect")
+                tab = next(iter(studio.tabs.values()))
+                assert tab.wait_idle()
+                controller = tab.controller
+                page.get_by_role("button", name="Start from ground truth").click()
+                _wait_for(lambda: len(controller.run.targets) == 1, what="the target", tab=tab)
+                page.get_by_label("Show ground truth").check()
+                page.get_by_role("tab", name="Ground truth").click()
+                tab.panels.playback.unlimited.value = True
+                page.get_by_role("button", name="Play").click()
+                _wait_for(
+                    lambda: controller.cursor == GT_FRAMES - 1 and not controller.playing,
+                    what="the last frame",
+                    tab=tab,
+                )
+                scores = page.get_by_text("against the ground truth")
+                _wait_for(lambda: f"frames 1-{GT_FRAMES}" in scores.inner_text(), what="scores")
+                shown = scores.inner_text()
+                charts = {row["labels"][1]: row for row in page.evaluate(CHARTS_JS)}
+                page.screenshot(path=str(ARTIFACTS / "app-ground-truth.png"))
+
+                _choose(page, "Maps", MAPS_VARIATION)
+                time.sleep(1.0)
+                page.screenshot(path=str(ARTIFACTS / "app-local-variation.png"))
+                _choose(page, "Maps", MAPS_PANELS)
+                page.get_by_role("tab", name="Maps").click()
+                _wait_for(lambda: tab.display.map_panels.shown(), what="the map panels")
+                time.sleep(1.0)
+                page.screenshot(path=str(ARTIFACTS / "app-map-panels.png"))
+            finally:
+                browser.close()
+    finally:
+        studio.stop()
+
+    assert main(["track", str(sequence), "--quiet"]) == 0
+    printed = capsys.readouterr().out
+    precision = printed.split("precision@20px: ")[1].split()[0]
+    auc = printed.split("success AUC: ")[1].split()[0]
+    assert f"P@20 = {precision}" in shown and f"AUC = {auc}" in shown, (shown, printed)
+    iou = charts["IoU"]  # the live IoU chart holds every frame (+2 for the frame line)
+    assert iou["frames"] == GT_FRAMES + 2 and iou["y_min"] == 0.0 and iou["y_max"] == 1.0
+
+
+def _choose(page, label: str, option: str) -> None:
+    page.get_by_label(label, exact=True).click()
+    page.get_by_role("option", name=option).click()

@@ -8,6 +8,7 @@ coordinates internally and converted to 0-based (x, y, w, h) boxes at the edge.
 from __future__ import annotations
 
 import math
+import time
 from collections.abc import Sequence
 
 import cv2
@@ -321,3 +322,21 @@ class CvAutoTrack:
         """(ok, box): ok is False on frames judged aberrant (the box is still the estimate)."""
         result = self.tracker.update(self._to_rgb(frame))
         return (not result.aberrant, result.box)
+
+
+def warm_up(params: TrackerParams | None = None) -> float:
+    """Compile (or load from numba's cache) every kernel the tracker runs, by tracking a small
+    synthetic target for four frames in colour and in grey; returns the seconds it took.
+
+    The first box a user draws then answers at once instead of waiting for the compiler.
+    """
+    started = time.perf_counter()
+    rng = np.random.default_rng(0)
+    frame = rng.integers(0, 64, (120, 160, 3), dtype=np.uint8)
+    frame[40:70, 60:90] = (230, 180, 40)
+    for image in (frame, cv2.cvtColor(frame, cv2.COLOR_RGB2GRAY)):
+        tracker = AutoTrack(params or TrackerParams())
+        tracker.init(image, (60.0, 40.0, 30.0, 30.0))
+        for shift in (1, 2, 3):
+            tracker.update(np.roll(image, shift, axis=1))
+    return time.perf_counter() - started
