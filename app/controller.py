@@ -31,6 +31,7 @@ from autotrack.localization.scene import Scene, load_scene
 from autotrack.params import PRESETS, preset
 from autotrack.pipeline import Pipeline, Recording, TrackedTarget
 from autotrack.sessions import open_session
+from autotrack.sessions.snapshot import finished_copy
 
 EXPORTS = ("tracks", "poses", "mcap")
 """What `export` can build: the tracks zip, the TUM poses, the session file itself."""
@@ -463,7 +464,7 @@ class TabController:
         elif what == "poses":
             name, content = f"{path.stem}_poses.tum", exports.poses_tum(path)
         elif what == "mcap":
-            name, content = path.name, path.read_bytes()
+            name, content = path.name, finished_copy(path)  # a finished snapshot
         else:
             raise InputError(f"unknown export {what!r}; choose one of {EXPORTS}")
         self.message = f"Sent {name} ({len(content) / 1024:.0f} kB)."

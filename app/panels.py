@@ -309,6 +309,9 @@ def show_opened(panels: Panels, controller: TabController) -> None:
     quiet.set(sequence.path, "value", "" if path is None else str(path))
     quiet.set(sequence.scene, "value", "" if scene_path is None else str(scene_path))
     quiet.set(panels.playback.frame, "max", max(2, 0 if run is None else run.frame_count))
+    listed = next((n for n, p in controller.sequence_choices.items() if p == path), None)
+    if listed is not None:  # the list shows the sequence that is open
+        quiet.set(sequence.dropdown, "value", listed)
 
 
 def show_frame(panels: Panels, controller: TabController) -> None:

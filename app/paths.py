@@ -77,7 +77,10 @@ def resolve_user_path(text: str, roots: Sequence[Path]) -> Path:
             continue
         if is_under(resolved, roots):
             return resolved
-    raise InputError(f"{cleaned}: no such file or folder among those this server may open")
+    raise InputError(
+        f"{cleaned}: no such file or folder among those this server may open; to open other "
+        "folders, restart the app with --allow-root DIR"
+    )
 
 
 def looks_like_sequence(path: Path) -> bool:

@@ -183,6 +183,7 @@ class Tab:
 
     def _command_done(self) -> None:
         controller = self.controller
+        show_state(self.panels, controller)  # first: it may replace the sequence list
         if controller.sequences_opened != self._scene_shown:
             self._scene_shown = controller.sequences_opened
             run = controller.run
@@ -192,7 +193,6 @@ class Tab:
             self._aim_camera()
             self.display.wake(canvas=True)
             show_opened(self.panels, controller)
-        show_state(self.panels, controller)
         self._publish()
 
     def _step_done(self) -> None:

@@ -75,7 +75,7 @@ def test_typed_path_must_stay_under_allowed_roots(tmp_path: Path) -> None:
 
     assert resolve_user_path("seq", roots) == (root / "seq").resolve()
     assert resolve_user_path(str(root / "seq"), roots) == (root / "seq").resolve()
-    refused = "no such file or folder among those this server may open"
+    refused = "no such file or folder among those this server may open.*--allow-root DIR"
     for typed in (
         str(outside),
         "seq/../../outside",
@@ -774,6 +774,9 @@ def test_uploaded_zip_opens_as_a_sequence(studio) -> None:
     assert run.frame_count == 3 and run.scene is None
     assert tab.controller.sequence_path.is_relative_to(studio.config.upload_dir.resolve())
     assert any("uploads" in name for name in tab.panels.sequence.dropdown.options)
+    # the list shows the sequence that is open (not the first listed)
+    shown = tab.panels.sequence.dropdown.value
+    assert tab.controller.sequence_choices[shown] == tab.controller.sequence_path
     assert not tab.panels.targets.boxes_json.visible
 
 
