@@ -158,6 +158,8 @@ class Tab:
     def seek(self, frame_index: int) -> None:
         """Go to a frame chosen on the slider; tracking up to it stops at the next command."""
         self.controller.seek(frame_index, interrupted=self.worker.has_waiting)
+        if self.panels.display.canvas.value == CANVAS_3D:  # after a jump, frame it all again
+            self._aim_camera()
 
     def place_typed_box(self, text: str) -> None:
         """A box typed as 'x, y, w, h', placed on the current frame."""
@@ -228,7 +230,12 @@ class Tab:
         self._publish()
 
     def _aim_camera(self) -> None:
-        eye, centre = self.display.view3d.viewpoint()
+        """Frame the scene, the ground truth and the estimated trajectory in the 3-D view."""
+        run = self.controller.run
+        trajectory = None if run is None else [p for _, p in run.valid_positions()]
+        eye, centre = self.display.view3d.viewpoint(
+            None if not trajectory else np.array(trajectory)
+        )
         self.channel.look_at(eye, centre, UP)
 
     def wait_idle(self, timeout: float = 60.0) -> bool:

@@ -49,6 +49,7 @@ class SceneView:
         self._aspect = 16 / 9
         self._scale = 0.3
         self._first_camera: np.ndarray | None = None
+        self._gt_positions: np.ndarray | None = None
         self.segments_sent = 0
         """Trajectory segments in the last update (a count the tests can check)."""
         self.frustum_state = "none"
@@ -69,6 +70,7 @@ class SceneView:
         self._first_camera = (
             None if gt_positions is None or not len(gt_positions) else gt_positions[0]
         )
+        self._gt_positions = gt_positions
         if scene is None:
             return
         points = np.stack([landmark.position for landmark in scene.landmarks])
@@ -101,19 +103,27 @@ class SceneView:
                 thickness_units="screen",
             )
 
-    def viewpoint(self) -> tuple[np.ndarray, np.ndarray]:
-        """Where to put the viewing camera and what to look at: behind and above the first
-        ground-truth camera position (else diagonally off the landmarks), +z up."""
+    def viewpoint(self, trajectory: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+        """Where to put the viewing camera and what to look at so the landmarks, the
+        ground-truth trajectory and `trajectory` (estimated positions) all fit in a 60° view:
+        from behind and above the first ground-truth camera (else diagonally), +z up."""
         if self.scene is None:
             return np.array([-3.0, -3.0, 3.0]), np.zeros(3)
-        points = np.stack([landmark.position for landmark in self.scene.landmarks])
-        centre = points.mean(axis=0)
-        extent = float(max(1.0, np.linalg.norm(np.ptp(points, axis=0))))
-        if self._first_camera is not None:
-            back = self._first_camera - centre
-            eye = centre + 1.6 * back + np.array([0.0, 0.0, 0.6 * extent])
+        parts = [np.stack([landmark.position for landmark in self.scene.landmarks])]
+        for extra in (self._gt_positions, trajectory):
+            if extra is not None and len(extra):
+                parts.append(np.asarray(extra, dtype=np.float64).reshape(-1, 3))
+        points = np.concatenate(parts)
+        points = points[np.isfinite(points).all(axis=1)]
+        centre = (points.min(axis=0) + points.max(axis=0)) / 2.0
+        radius = float(max(0.5, np.linalg.norm(points - centre, axis=1).max()))
+        if self._first_camera is not None and np.linalg.norm(self._first_camera - centre) > 1e-6:
+            direction = self._first_camera - centre
+            direction = direction / np.linalg.norm(direction) + np.array([0.0, 0.0, 0.5])
         else:
-            eye = centre + np.array([-1.0, -1.0, 1.0]) * extent
+            direction = np.array([-1.0, -1.0, 1.0])
+        # A sphere of `radius` fills a 60° view at radius / sin(30°); 1.3 leaves a margin.
+        eye = centre + direction / np.linalg.norm(direction) * 2.0 * radius * 1.3
         return eye, centre
 
     def update(self, view: PoseView, thumbnail: np.ndarray | None) -> None:

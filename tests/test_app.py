@@ -828,3 +828,25 @@ def test_shared_benchmark_sequence_opens_by_typed_path_and_tracks(tmp_path: Path
         assert not run.poses
     finally:
         studio.stop()
+
+
+def test_the_3d_view_frames_landmarks_ground_truth_and_trajectory() -> None:
+    from app.boxes import ground_truth_positions
+    from app.view3d import SceneView
+    from autotrack.localization.scene import load_scene
+
+    scene = load_scene(DEMO / "scene.json")
+    truth = ground_truth_positions(DEMO / "scene.json")
+    server = viser.ViserServer(port=0, verbose=False)
+    view = SceneView(server.scene)
+    view.show_scene(scene, truth)
+    server.stop()
+    far = truth[-1] + np.array([6.0, -4.0, 2.0])  # an estimate that drifted far away
+    for trajectory in (None, np.array([truth[0], far])):
+        eye, centre = view.viewpoint(trajectory)
+        axis = (centre - eye) / np.linalg.norm(centre - eye)
+        points = [lm.position for lm in scene.landmarks] + list(truth)
+        points += [] if trajectory is None else list(trajectory)
+        for point in points:  # inside a 50° cone: visible in the 60°-wide view
+            ray = (point - eye) / np.linalg.norm(point - eye)
+            assert np.degrees(np.arccos(np.clip(ray @ axis, -1, 1))) < 25.0
