@@ -237,6 +237,25 @@ def peak_position(result: TrackResult) -> tuple[float, float] | None:
     return (sx + (col + 0.5) * sw / cols, sy + (row + 0.5) * sh / rows)
 
 
+def target_part(values: np.ndarray, search_box: Box, box: Box) -> tuple[np.ndarray, Box]:
+    """The cells of a map (covering `search_box`) that lie under the target's `box`, and the
+    image region they cover: where ASR sets the spatial weights from the local variation."""
+    rows, cols = values.shape[:2]
+    sx, sy, sw, sh = search_box
+    x, y, w, h = box
+    c0 = int(np.clip(np.floor((x - sx) / sw * cols), 0, cols - 1))
+    c1 = int(np.clip(np.ceil((x + w - sx) / sw * cols), c0 + 1, cols))
+    r0 = int(np.clip(np.floor((y - sy) / sh * rows), 0, rows - 1))
+    r1 = int(np.clip(np.ceil((y + h - sy) / sh * rows), r0 + 1, rows))
+    region = (
+        sx + c0 * sw / cols,
+        sy + r0 * sh / rows,
+        (c1 - c0) * sw / cols,
+        (r1 - r0) * sh / rows,
+    )
+    return values[r0:r1, c0:c1], region
+
+
 def blend_map(
     image: np.ndarray,
     values: np.ndarray,
@@ -310,7 +329,7 @@ def draw_overlays(
         return (box[0] * scale, box[1] * scale, box[2] * scale, box[3] * scale)
 
     line = max(1, round(canvas.shape[1] / 640))
-    if map_kind in ("response", "local_variation"):
+    if map_kind in ("response", "local_variation", "local_variation_target"):
         legend: Limits | None = None
         for target in targets:
             result = target.result
@@ -319,8 +338,11 @@ def draw_overlays(
             values = result.response_map if map_kind == "response" else result.local_variation
             if values is None:
                 continue
-            limits = robust_limits(values) if map_kind == "local_variation" else None
-            blend_map(canvas, values, scaled(result.search_box), map_opacity, limits)
+            region = result.search_box
+            if map_kind == "local_variation_target":  # only where ASR uses it
+                values, region = target_part(values, result.search_box, target.box)
+            limits = None if map_kind == "response" else robust_limits(values)
+            blend_map(canvas, values, scaled(region), map_opacity, limits)
             legend = limits or legend
         if legend is not None:
             _legend_on(canvas, legend)
@@ -376,11 +398,15 @@ def _truth_on(canvas: np.ndarray, box: Box, line: int) -> None:
 
 
 def _legend_on(canvas: np.ndarray, limits: Limits) -> None:
-    """The local-variation colour scale in the frame's top-right corner, in place."""
+    """The local-variation colour scale in the frame's top-right corner, in place (drawn at
+    220 px and enlarged with wide frames, so it reads at the same size on the page)."""
     width = min(220, canvas.shape[1])
     bar = legend_bar(width, limits)
     _label(bar, "local var. p2-p98", (width // 2 - 55, 22), (80, 80, 80))
-    canvas[: bar.shape[0], canvas.shape[1] - width :] = bar
+    zoom = max(1, round(canvas.shape[1] / 640))
+    bar = cv2.resize(bar, (width * zoom, bar.shape[0] * zoom), interpolation=cv2.INTER_NEAREST)
+    bar = bar[:, : canvas.shape[1]]
+    canvas[: bar.shape[0], canvas.shape[1] - bar.shape[1] :] = bar
 
 
 def scaled_for_display(image: np.ndarray, max_width: int) -> np.ndarray:

@@ -28,8 +28,13 @@ CANVAS_3D = "3-D view"
 MAPS_OFF = "off"
 MAPS_RESPONSE = "response map on frame"
 MAPS_VARIATION = "local variation on frame"
+MAPS_VARIATION_TARGET = "local variation, target region (ASR)"
 MAPS_PANELS = "panels (per target)"
-MAP_KINDS = {MAPS_RESPONSE: "response", MAPS_VARIATION: "local_variation"}
+MAP_KINDS = {
+    MAPS_RESPONSE: "response",
+    MAPS_VARIATION: "local_variation",
+    MAPS_VARIATION_TARGET: "local_variation_target",
+}
 """Maps choice -> the map `draw_overlays` blends over the frame."""
 
 
@@ -176,7 +181,7 @@ def _display_panel(
         )
         maps = gui.add_dropdown(
             "Maps",
-            options=(MAPS_OFF, MAPS_RESPONSE, MAPS_VARIATION, MAPS_PANELS),
+            options=(MAPS_OFF, MAPS_RESPONSE, MAPS_VARIATION, MAPS_VARIATION_TARGET, MAPS_PANELS),
             initial_value=MAPS_RESPONSE,
         )
         canvas_fps = gui.add_slider(

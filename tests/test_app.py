@@ -245,6 +245,25 @@ def test_overlay_draws_the_map_inside_the_search_region_only() -> None:
     assert peak_position(result) == pytest.approx((20.0 + 20.5 * 2.0, 15.0 + 5.5 * 2.0))
 
 
+def test_local_variation_can_be_drawn_over_the_target_region_only() -> None:
+    rng = np.random.default_rng(1)
+    result = _result(rng.uniform(0.1, 1.0, (25, 25)).astype(np.float32))
+    frame = np.full((120, 160, 3), 128, np.uint8)
+    drawing = TargetDrawing(label="T1", colour=(255, 0, 0), box=result.box, result=result)
+    plain = draw_overlays(frame, [drawing], "none")
+    whole = draw_overlays(frame, [drawing], "local_variation")
+    target = draw_overlays(frame, [drawing], "local_variation_target")
+
+    def changed(image: np.ndarray) -> np.ndarray:
+        return np.any(image != plain, axis=2)[30:, :]  # below the legend strip
+
+    rows, cols = np.nonzero(changed(target))
+    # the box (40, 30, 20, 10) in whole 2-px cells, the outline drawn around it
+    assert rows.min() + 30 >= 29 and rows.max() + 30 <= 41 and cols.min() >= 39 and cols.max() <= 61
+    assert changed(whole).sum() > 4 * changed(target).sum()  # the whole search region
+    assert np.any(whole[:26] != plain[:26])  # the colour-scale legend, top right
+
+
 def test_colour_map_spans_the_jet_range() -> None:
     image = colour_map(np.linspace(0, 1, 256, dtype=np.float32).reshape(16, 16))
     assert image.shape == (16, 16, 3)
