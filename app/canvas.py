@@ -330,22 +330,7 @@ def draw_overlays(
 
     line = max(1, round(canvas.shape[1] / 640))
     if map_kind in ("response", "local_variation", "local_variation_target"):
-        legend: Limits | None = None
-        for target in targets:
-            result = target.result
-            if result is None:
-                continue
-            values = result.response_map if map_kind == "response" else result.local_variation
-            if values is None:
-                continue
-            region = result.search_box
-            if map_kind == "local_variation_target":  # only where ASR uses it
-                values, region = target_part(values, result.search_box, target.box)
-            limits = None if map_kind == "response" else robust_limits(values)
-            blend_map(canvas, values, scaled(region), map_opacity, limits)
-            legend = limits or legend
-        if legend is not None:
-            _legend_on(canvas, legend)
+        _blend_maps(canvas, targets, map_kind, scale, map_opacity)
     if truth_box is not None:
         _truth_on(canvas, scaled(truth_box), line)
     for target in targets:
@@ -387,6 +372,37 @@ def draw_overlays(
             cv2.LINE_AA,
         )
     return canvas
+
+
+def _blend_maps(
+    canvas: np.ndarray,
+    targets: Sequence[TargetDrawing],
+    map_kind: str,
+    scale: float,
+    opacity: float,
+) -> None:
+    """Each target's map blended over its search region (or its box, for the local variation
+    over the target region), with the local variation's colour scale top right; in place."""
+
+    def scaled(box: Box) -> Box:
+        return (box[0] * scale, box[1] * scale, box[2] * scale, box[3] * scale)
+
+    legend: Limits | None = None
+    for target in targets:
+        result = target.result
+        if result is None:
+            continue
+        values = result.response_map if map_kind == "response" else result.local_variation
+        if values is None:
+            continue
+        region = result.search_box
+        if map_kind == "local_variation_target":  # only where ASR uses it
+            values, region = target_part(values, result.search_box, target.box)
+        limits = None if map_kind == "response" else robust_limits(values)
+        blend_map(canvas, values, scaled(region), opacity, limits)
+        legend = limits or legend
+    if legend is not None:
+        _legend_on(canvas, legend)
 
 
 def _truth_on(canvas: np.ndarray, box: Box, line: int) -> None:
