@@ -125,6 +125,8 @@ def test_draw_play_inspect_and_download_in_chromium(studio, tmp_path: Path) -> N
                 u, v = letterbox.frame_to_screen(x, y)
                 return (canvas["x"] + u * canvas["width"], canvas["y"] + v * canvas["height"])
 
+            _wait_for(lambda: "*to draw*" in tab.panels.targets.table.content, what="landmarks")
+            page.screenshot(path=str(ARTIFACTS / "app-landmarks-to-draw.png"))
             for count, landmark_id in enumerate(SHUFFLED, start=1):
                 x, y, w, h = boxes[landmark_id]
                 _shift_drag(page, page_point(x, y), page_point(x + w, y + h))
