@@ -365,11 +365,11 @@ def targets_table(controller: TabController) -> str:
     if run is not None and run.scene is not None:
         tied = {target.landmark_id: target.id for target in targets if target.landmark_id}
         items = [
-            f"**{landmark.id}** {landmark.name or ''} "
+            f"- **{landmark.id}** {landmark.name or ''} "
             + (f"→ {tied[landmark.id]}" if landmark.id in tied else "· *to draw*")
             for landmark in run.scene.landmarks
         ]
-        parts.append("Landmarks: " + "; ".join(items))
+        parts.append("Scene landmarks:\n\n" + "\n".join(items))
     if not targets:
         parts.append("No targets yet. Shift-drag on the frame to draw one (any order).")
         return "\n\n".join(parts)

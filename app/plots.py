@@ -156,6 +156,8 @@ class SignalPlots:
         self._handles: list[viser.GuiUplotHandle] = []
         self._scales: list[dict | None] = []
         self._container = container if container is not None else gui.add_folder("Plots")
+        with self._container:
+            self._hint = gui.add_markdown("The charts appear once a target is drawn.")
 
     def _build(self, history: SignalHistory) -> None:
         for handle in self._handles:
@@ -195,6 +197,8 @@ class SignalPlots:
     def update(self, history: SignalHistory, cursor: int) -> None:
         """Send the latest values and the cursor at frame `cursor` (rebuilding the charts when
         the target list changed)."""
+        if self._hint.visible != (not history.target_ids):
+            self._hint.visible = not history.target_ids
         if not history.target_ids:
             for handle in self._handles:
                 handle.remove()
