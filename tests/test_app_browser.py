@@ -235,6 +235,7 @@ def test_draw_play_inspect_and_download_in_chromium(studio, tmp_path: Path) -> N
     ]
     assert len(tum_lines) == sum(pose.valid for pose in run.poses.values())
     session = open_session(saved["Download session (MCAP)"])
+    assert not session.truncated  # downloaded while the tab was recording: a finished snapshot
     assert session.targets == ("T1", "T2", "T3", "T4")
     assert [session.landmark_ids[t] for t in session.targets] == list(SHUFFLED)
     for target_id in session.targets:
