@@ -277,6 +277,11 @@ def _check_pixels(name: str, head: bytes, limits: UploadLimits) -> None:
     try:
         with Image.open(BytesIO(head)) as image:
             width, height = image.size
+    except Image.DecompressionBombError as error:  # PIL's own, far higher, limit
+        raise InputError(
+            f"refused the zip: {name} has more than "
+            f"{limits.max_image_pixels / 1e6:.0f} million pixels"
+        ) from error
     except (UnidentifiedImageError, OSError, ValueError, SyntaxError) as error:
         raise InputError(f"refused the zip: {name} is not a readable image") from error
     if width * height > limits.max_image_pixels:
