@@ -87,7 +87,7 @@ def test_a_huge_declared_upload_is_refused_at_its_start_and_its_parts_dropped(st
         browser.part(index, b"\x01" * PART)
     grown = _rss() - before
     assert grown < 60 * 1024**2, f"the server grew by {grown / 1e6:.0f} MB"
-    # in browser.channel.notes[-1][0]
+    assert "the limit is 210 MB" in browser.channel.notes[-1][0]
     assert _incoming(studio) == [] and studio.uploads.in_flight() == 0
 
 
