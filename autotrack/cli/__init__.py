@@ -35,11 +35,28 @@ def main(argv: list[str] | None = None) -> int:
     try:
         return int(args.func(args) or 0)
     except AutoTrackError as error:
-        print(f"autotrack: error: {error}", file=sys.stderr)
+        print(f"autotrack: error: {_one_line(str(error))}", file=sys.stderr)
+        return 2
+    except OSError as error:  # a file that cannot be read or written, a full disk
+        where = f"{error.filename}: " if error.filename else ""
+        print(f"autotrack: error: {where}{error.strerror or error}", file=sys.stderr)
+        return 2
+    except UnicodeDecodeError as error:
+        print(
+            f"autotrack: error: an input file is not UTF-8 text ({error.reason})", file=sys.stderr
+        )
+        return 2
+    except RecursionError:
+        print("autotrack: error: an input file is nested too deeply", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
         print("autotrack: interrupted", file=sys.stderr)
         return 130
+
+
+def _one_line(text: str) -> str:
+    """`text` with its line breaks and NUL characters shown escaped."""
+    return text.replace("\x00", "\\x00").replace("\r", "\\r").replace("\n", "\\n")
 
 
 if __name__ == "__main__":

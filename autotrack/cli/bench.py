@@ -58,12 +58,14 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
         metavar="PATH",
         help="published Color Names table (32768 x 10, .npy or .mat) for the AutoTrack variants",
     )
+    parser.add_argument("--force", action="store_true", help="replace an existing --json file")
     parser.add_argument("--no-progress", action="store_true", help="hide the progress bar")
     parser.set_defaults(func=run)
 
 
 def run(args: argparse.Namespace) -> int:
     """Run the benchmark described by the parsed arguments."""
+    from autotrack.cli.checks import check_output_file
     from autotrack.errors import InputError
     from autotrack.evaluation.benchmark import (
         format_table,
@@ -75,6 +77,7 @@ def run(args: argparse.Namespace) -> int:
     )
     from autotrack.evaluation.datasets import load_sequences
 
+    check_output_file(args.json, "--json", force=args.force)
     trackers = validate_tracker_names(args.trackers.split(","))
     if args.jobs < 1:
         raise InputError(f"--jobs must be at least 1, got {args.jobs}")

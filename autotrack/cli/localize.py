@@ -13,6 +13,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 from tqdm import tqdm
 
+from autotrack.cli.checks import check_output_file, finite
 from autotrack.errors import InputError
 from autotrack.io.boxes_json import read_boxes_json
 from autotrack.io.csv_table import write_csv
@@ -90,6 +91,9 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
         help="record the run to this new MCAP session file (never overwritten; see "
         "`autotrack session`)",
     )
+    parser.add_argument(
+        "--force", action="store_true", help="replace existing --out and --tracks files"
+    )
     parser.add_argument("--quiet", action="store_true", help="no progress bar")
     parser.set_defaults(func=run_localize)
 
@@ -109,6 +113,13 @@ def run_localize(args: argparse.Namespace) -> int:
     from autotrack.localization.localizer import LocalizerParams
     from autotrack.pipeline import Recording, localize_sequence
 
+    check_output_file(args.out, "--out", force=args.force)
+    check_output_file(args.tracks, "--tracks", force=args.force)
+    if args.session is not None and (args.session.exists() or args.session.is_symlink()):
+        raise InputError(f"--session {args.session} exists; session files are never replaced")
+    check_output_file(args.session, "--session", force=False)
+    finite(args.fps, "--fps", low=0)
+    finite(args.max_rms, "--max-rms", low=0)
     scene_path = _default_file(args.scene, args.sequence, "scene.json", "--scene")
     scene = load_scene(scene_path)
     for warning in scene_warnings(scene):
@@ -148,6 +159,12 @@ def run_localize(args: argparse.Namespace) -> int:
     timestamps = np.arange(len(records)) / fps
     report = summarise(records, timestamps, scene, args.out, args.tracks, gt, frames.name)
     print(report)
+    if not any(record.pose.valid for record in records):
+        print(
+            "autotrack: warning: no frame got a valid pose: check the scene's intrinsics and "
+            "landmarks, the boxes and --max-rms",
+            file=sys.stderr,
+        )
     if args.session is not None:
         print(f"session recorded to {args.session}")
     return 0

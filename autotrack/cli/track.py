@@ -9,6 +9,7 @@ from pathlib import Path
 import numpy as np
 from tqdm import tqdm
 
+from autotrack.cli.checks import check_output_file
 from autotrack.errors import BoxError, InputError
 from autotrack.evaluation.datasets import GROUND_TRUTH_FILE
 from autotrack.evaluation.metrics import score_sequence
@@ -56,6 +57,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
         help="published Color Names table (.npy/.mat) instead of the built-in colour feature",
     )
     parser.add_argument("--out", type=Path, default=None, help="write boxes here (x,y,w,h rows)")
+    parser.add_argument("--force", action="store_true", help="replace an existing --out file")
     parser.add_argument("--quiet", action="store_true", help="no progress bar")
     parser.set_defaults(func=run)
 
@@ -68,6 +70,7 @@ def _ground_truth(sequence: Path) -> np.ndarray | None:
 def run(args: argparse.Namespace) -> int:
     from autotrack.pipeline import Pipeline
 
+    check_output_file(args.out, "--out", force=args.force)
     if args.colour_table is not None and not args.colour_table.is_file():
         raise InputError(f"Color Names table not found: {args.colour_table}")
     frames = open_frames(args.sequence)
