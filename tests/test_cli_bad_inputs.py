@@ -106,9 +106,29 @@ def test_bad_input_ends_in_one_line_and_exit_2(workspace: Path, argv: list[str])
     assert not (workspace / "fresh").exists()
 
 
+@pytest.mark.parametrize(
+    ("field", "value"), [("fx", 1e-300), ("cx", 1e308), ("distortion", [1e6, 0, 0, 0, 0])]
+)
+def test_absurd_intrinsics_are_refused(workspace: Path, tmp_path: Path, field, value) -> None:
+    scene = json.loads((DEMO / "scene.json").read_text())
+    scene["camera"][field] = value
+    (tmp_path / "scene.json").write_text(json.dumps(scene))
+    done = subprocess.run(
+        [sys.executable, "-m", "autotrack.cli", "localize", "demo", "--quiet"]
+        + ["--scene", str(tmp_path / "scene.json")],
+        cwd=workspace,
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
+    assert done.returncode == 2 and f"camera.{field}" in done.stderr, done.stderr
+    assert done.stderr.count("\n") == 1
+
+
 def test_a_run_without_any_valid_pose_warns(workspace: Path, tmp_path: Path) -> None:
     scene = json.loads((DEMO / "scene.json").read_text())
-    scene["camera"]["fx"] = scene["camera"]["fy"] = 1e-3  # absurd intrinsics
+    # Plausible intrinsics, but far from the demo camera's: no pose passes the checks.
+    scene["camera"]["fx"] = scene["camera"]["fy"] = 5.0
     (tmp_path / "scene.json").write_text(json.dumps(scene))
     done = subprocess.run(
         [sys.executable, "-m", "autotrack.cli", "localize", "demo", "--quiet"]
