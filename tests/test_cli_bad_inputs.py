@@ -67,6 +67,9 @@ CASES = {
     "localize --scene deeply nested": ["localize", "demo", "--scene", "nested.json"],
     "localize --gt not UTF-8": ["localize", "demo", "--gt", "not_utf8.json"],
     "session info not UTF-8": ["session", "info", "not_utf8.json"],
+    # the app, before it serves
+    "app --sessions under a file": ["app", "--sessions", "existing.txt/sessions", "--port", "0"],
+    "app --host unknown name": ["app", "--host", "no-such-host.invalid", "--port", "0"],
 }
 
 
