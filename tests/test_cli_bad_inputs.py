@@ -142,3 +142,32 @@ def test_a_run_without_any_valid_pose_warns(workspace: Path, tmp_path: Path) -> 
         timeout=600,
     )
     assert "no frame got a valid pose" in done.stderr, done.stderr
+
+
+def test_a_read_only_output_is_refused_before_any_work(tmp_path: Path, monkeypatch) -> None:
+    """As root every folder is writable, so the permission answer is injected."""
+    from autotrack.cli import checks
+    from autotrack.errors import InputError
+
+    monkeypatch.setattr(checks.os, "access", lambda path, mode: False)
+    with pytest.raises(InputError, match="permission denied"):
+        checks.check_output_file(tmp_path / "new.txt", "--out", force=False)
+    (tmp_path / "old.txt").write_bytes(SENTINEL)
+    with pytest.raises(InputError, match="cannot be written"):
+        checks.check_output_file(tmp_path / "old.txt", "--out", force=True)
+
+
+def test_a_full_disk_at_the_end_ends_in_one_line(workspace: Path, monkeypatch, capsys) -> None:
+    import errno
+
+    from autotrack.cli import main, track
+
+    def full_disk(path, boxes) -> None:
+        raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC), str(path))
+
+    monkeypatch.setattr(track, "write_boxes", full_disk)
+    out = workspace / "full" / "boxes.txt"
+    argv = ["track", str(workspace / "seq"), "--init", "1,1,9,9", "--out", str(out), "--quiet"]
+    assert main(argv) == 2
+    err = capsys.readouterr().err
+    assert err == f"autotrack: error: {out}: No space left on device\n"
