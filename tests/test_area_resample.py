@@ -1,0 +1,69 @@
+"""The compiled INTER_AREA sampler gives OpenCV's samples exactly (the faithful preset's inputs)."""
+
+from __future__ import annotations
+
+import cv2
+import numpy as np
+import pytest
+
+from autotrack.area_resample import area_path_is_generic, area_resize_crops
+from autotrack.sampling import crop_replicate, resize_auto, scale_patches
+
+
+def _opencv_sample(image, top, left, size_hw, out_hw):
+    """The release's sample as the code computed it before: crop with replicated border + cv2."""
+    rows, cols = size_hw
+    crop = crop_replicate(image, (top + rows // 2, left + cols // 2), (rows, cols))
+    return cv2.resize(
+        np.ascontiguousarray(crop), (out_hw[1], out_hw[0]), interpolation=cv2.INTER_AREA
+    )
+
+
+def _images():
+    rng = np.random.default_rng(7)
+    noise = rng.integers(0, 256, (240, 320, 3), dtype=np.uint8)
+    smooth = cv2.GaussianBlur(noise, (0, 0), 3)
+    return {"noise": noise, "smooth": smooth, "grey": np.ascontiguousarray(smooth[:, :, 1])}
+
+
+@pytest.mark.parametrize("kind", ["noise", "smooth", "grey"])
+def test_area_samples_equal_opencv_bit_for_bit(kind):
+    image = _images()[kind]
+    rng = np.random.default_rng(11)
+    checked = 0
+    while checked < 300:
+        size = tuple(int(v) for v in rng.integers(4, 200, 2))
+        out = tuple(int(v) for v in rng.integers(2, 50, 2))
+        if not area_path_is_generic(size, out):
+            continue
+        # anywhere, including crops that hang over (or lie wholly outside) the border
+        top, left = int(rng.integers(-150, 300)), int(rng.integers(-150, 400))
+        expected = _opencv_sample(image, top, left, size, out)
+        got = area_resize_crops(image, [top], [left], np.array([size]), out)[0]
+        assert got.dtype == np.uint8 and got.shape == expected.shape
+        np.testing.assert_array_equal(got, expected, err_msg=f"{size} -> {out} at {top},{left}")
+        checked += 1
+
+
+def test_generic_path_excludes_the_cases_opencv_computes_otherwise():
+    assert area_path_is_generic((100, 80), (33, 27))
+    assert not area_path_is_generic((100, 80), (100, 80))  # same size: a copy
+    assert not area_path_is_generic((100, 80), (50, 40))  # integer ratio: resizeAreaFast
+    assert not area_path_is_generic((100, 80), (120, 40))  # enlarging rows: bilinear variant
+    assert area_path_is_generic((100, 80), (50, 30))  # integer on one axis only
+
+
+@pytest.mark.parametrize("kind", ["noise", "grey"])
+def test_scale_patches_equal_one_opencv_resize_per_scale(kind):
+    image = _images()[kind]
+    factors = 1.03 ** (16 - np.arange(33))
+    for base, model, position in (
+        ((61.3, 47.9), (25, 19), (120.0, 160.0)),
+        ((40.0, 20.0), (32, 16), (5.0, 310.0)),  # near the border: replicated pixels
+        ((8.0, 6.0), (8, 6), (100.0, 100.0)),  # model = base: some scales copy or enlarge
+    ):
+        got = scale_patches(image, position, np.array(base), factors, model)
+        for index, factor in enumerate(factors):
+            size = np.maximum(np.floor(np.array(base) * factor), 2).astype(int)
+            crop = crop_replicate(image, position, (size[0], size[1]))
+            np.testing.assert_array_equal(got[index], resize_auto(crop, model))
