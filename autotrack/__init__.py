@@ -8,9 +8,12 @@
 
 from importlib.metadata import PackageNotFoundError, version
 
+from autotrack.compile_cache import configure_numba_cache
 from autotrack.errors import AutoTrackError, BoxError, InputError, SceneError, SessionError
 from autotrack.params import PRESETS, TrackerParams, preset
 from autotrack.result import TrackResult
+
+configure_numba_cache()  # before numba is imported: compiled kernels need a writable cache
 
 
 def __getattr__(name: str):

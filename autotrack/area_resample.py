@@ -164,6 +164,89 @@ def _area_samples(image, tops, lefts, heights, widths, out):
         _area_from_region(region, tops[i] - top, lefts[i] - left, heights[i], widths[i], out[i])
 
 
+@njit(cache=True, nogil=True, fastmath=False, error_model="numpy")
+def _area_crop(image, top, left, src_h, src_w, out):
+    """One large crop: ResizeArea_Invoker in the image's own (row, col, channel) layout.
+
+    Each source row's horizontal sums are computed once (OpenCV recomputes a row shared by two
+    output rows, with the same result); the vertical pass then runs vectorised along the row.
+    """
+    height, width, channels = image.shape
+    dst_h, dst_w = out.shape[0], out.shape[1]
+    x_src = np.empty(2 * src_w + 2, np.int64)
+    x_weight = np.empty(2 * src_w + 2, np.float32)
+    x_offsets = np.empty(dst_w + 1, np.int64)
+    y_src = np.empty(2 * src_h + 2, np.int64)
+    y_weight = np.empty(2 * src_h + 2, np.float32)
+    y_offsets = np.empty(dst_h + 1, np.int64)
+    _area_taps(src_w, dst_w, x_src, x_weight, x_offsets)
+    _area_taps(src_h, dst_h, y_src, y_weight, y_offsets)
+    n_x = x_offsets[dst_w]
+    columns = np.empty(n_x, np.int64)
+    for k in range(n_x):
+        columns[k] = min(max(left + x_src[k], 0), width - 1)
+    row_width = dst_w * channels
+    horizontal = np.empty((src_h, row_width), np.float32)
+    flat = image.reshape(height, width * channels)
+    for k in range(n_x):
+        columns[k] *= channels  # offsets into a flattened row
+    for r in range(src_h):
+        line = flat[min(max(top + r, 0), height - 1)]
+        target = horizontal[r]
+        if channels == 3:  # the common case, three independent sums in registers
+            for dx in range(dst_w):
+                first, last = x_offsets[dx], x_offsets[dx + 1]
+                p, alpha = columns[first], x_weight[first]
+                a0 = np.float32(line[p]) * alpha
+                a1 = np.float32(line[p + 1]) * alpha
+                a2 = np.float32(line[p + 2]) * alpha
+                for k in range(first + 1, last):
+                    p, alpha = columns[k], x_weight[k]
+                    a0 = a0 + np.float32(line[p]) * alpha
+                    a1 = a1 + np.float32(line[p + 1]) * alpha
+                    a2 = a2 + np.float32(line[p + 2]) * alpha
+                target[3 * dx] = a0
+                target[3 * dx + 1] = a1
+                target[3 * dx + 2] = a2
+        else:
+            for dx in range(dst_w):
+                first, last = x_offsets[dx], x_offsets[dx + 1]
+                for c in range(channels):
+                    acc = np.float32(line[columns[first] + c]) * x_weight[first]
+                    for k in range(first + 1, last):
+                        acc = acc + np.float32(line[columns[k] + c]) * x_weight[k]
+                    target[dx * channels + c] = acc
+    total = np.empty(row_width, np.float32)
+    for dy in range(dst_h):
+        first = y_offsets[dy]
+        source = horizontal[y_src[first]]
+        beta = y_weight[first]
+        for i in range(row_width):
+            total[i] = beta * source[i]
+        for j in range(first + 1, y_offsets[dy + 1]):
+            source = horizontal[y_src[j]]
+            beta = y_weight[j]
+            for i in range(row_width):
+                total[i] = total[i] + beta * source[i]
+        row = out[dy].reshape(row_width)
+        for i in range(row_width):
+            value = np.rint(total[i])
+            row[i] = np.uint8(min(max(value, np.float32(0.0)), np.float32(255.0)))
+
+
+def area_resize_crop(
+    image: np.ndarray, top: int, left: int, size_hw: tuple[int, int], out_hw: tuple[int, int]
+) -> np.ndarray:
+    """One crop of `image` (0-based top/left, border replicated) area-shrunk to `out_hw`, exactly
+    as `cv2.resize(crop, INTER_AREA)`; `area_path_is_generic(size_hw, out_hw)` must hold."""
+    pixels = np.ascontiguousarray(image)
+    if pixels.ndim == 2:
+        pixels = pixels.reshape(*pixels.shape, 1)
+    out = np.empty((int(out_hw[0]), int(out_hw[1]), pixels.shape[2]), np.uint8)
+    _area_crop(pixels, int(top), int(left), int(size_hw[0]), int(size_hw[1]), out)
+    return out if image.ndim == 3 else out[..., 0]
+
+
 def area_resize_crops(
     image: np.ndarray,
     tops: np.ndarray,

@@ -12,7 +12,7 @@ import math
 import cv2
 import numpy as np
 
-from autotrack.area_resample import area_path_is_generic, area_resize_crops
+from autotrack.area_resample import area_path_is_generic, area_resize_crop, area_resize_crops
 
 
 def resize_auto(patch: np.ndarray, size_hw: tuple[int, int]) -> np.ndarray:
@@ -64,6 +64,12 @@ def search_patch(
     output_size_hw: tuple[int, int],
 ) -> np.ndarray:
     """The search region around `position` resampled to the filter's fixed patch size."""
+    region = (max(int(region_size_hw[0]), 1), max(int(region_size_hw[1]), 1))
+    output = (int(output_size_hw[0]), int(output_size_hw[1]))
+    if area_path_is_generic(region, output):  # OpenCV's generic area shrink, computed exactly
+        top = math.floor(position[0]) - region[0] // 2
+        left = math.floor(position[1]) - region[1] // 2
+        return area_resize_crop(image, top, left, region, output)
     patch = crop_replicate(image, position, region_size_hw)
     return resize_auto(patch, output_size_hw)  # cv2 reads the strided view, no copy
 

@@ -6,8 +6,8 @@ import cv2
 import numpy as np
 import pytest
 
-from autotrack.area_resample import area_path_is_generic, area_resize_crops
-from autotrack.sampling import crop_replicate, resize_auto, scale_patches
+from autotrack.area_resample import area_path_is_generic, area_resize_crop, area_resize_crops
+from autotrack.sampling import crop_replicate, resize_auto, scale_patches, search_patch
 
 
 def _opencv_sample(image, top, left, size_hw, out_hw):
@@ -67,3 +67,32 @@ def test_scale_patches_equal_one_opencv_resize_per_scale(kind):
             size = np.maximum(np.floor(np.array(base) * factor), 2).astype(int)
             crop = crop_replicate(image, position, (size[0], size[1]))
             np.testing.assert_array_equal(got[index], resize_auto(crop, model))
+
+
+@pytest.mark.parametrize("kind", ["noise", "smooth", "grey"])
+def test_search_patch_equals_crop_then_opencv_resize(kind):
+    image = _images()[kind]
+    rng = np.random.default_rng(3)
+    for _ in range(40):
+        side = int(rng.integers(120, 330))
+        out = int(rng.integers(100, 201)) // 4 * 4
+        position = (float(rng.uniform(-20, 260)), float(rng.uniform(-20, 340)))
+        crop = crop_replicate(image, position, (side, side))
+        np.testing.assert_array_equal(
+            search_patch(image, position, (side, side), (out, out)), resize_auto(crop, (out, out))
+        )
+
+
+def test_single_crop_kernel_equals_opencv_on_large_crops():
+    image = _images()["smooth"]
+    rng = np.random.default_rng(5)
+    for _ in range(60):
+        size = tuple(int(v) for v in rng.integers(50, 400, 2))
+        out = tuple(int(v) for v in rng.integers(20, 250, 2))
+        if not area_path_is_generic(size, out):
+            continue
+        top, left = int(rng.integers(-100, 200)), int(rng.integers(-100, 300))
+        np.testing.assert_array_equal(
+            area_resize_crop(image, top, left, size, out),
+            _opencv_sample(image, top, left, size, out),
+        )
