@@ -234,16 +234,30 @@ def _area_crop(image, top, left, src_h, src_w, out):
             row[i] = np.uint8(min(max(value, np.float32(0.0)), np.float32(255.0)))
 
 
+def _kernel_pixels(image: np.ndarray, top, left, bottom, right):
+    """(H, W, C) C-contiguous pixels covering rows top..bottom and cols left..right (clamped),
+    and the offset of the returned array in the image. A strided frame (a view into a larger
+    array) is cut to that region before the copy, so the cost never grows with the image."""
+    pixels = image if image.ndim == 3 else image.reshape(*image.shape, 1)
+    if pixels.flags.c_contiguous:
+        return pixels, 0, 0
+    height, width = pixels.shape[:2]
+    row0 = min(max(int(top), 0), height - 1)
+    col0 = min(max(int(left), 0), width - 1)
+    row1 = max(min(int(bottom), height), row0 + 1)
+    col1 = max(min(int(right), width), col0 + 1)
+    return np.ascontiguousarray(pixels[row0:row1, col0:col1]), row0, col0
+
+
 def area_resize_crop(
     image: np.ndarray, top: int, left: int, size_hw: tuple[int, int], out_hw: tuple[int, int]
 ) -> np.ndarray:
     """One crop of `image` (0-based top/left, border replicated) area-shrunk to `out_hw`, exactly
     as `cv2.resize(crop, INTER_AREA)`; `area_path_is_generic(size_hw, out_hw)` must hold."""
-    pixels = np.ascontiguousarray(image)
-    if pixels.ndim == 2:
-        pixels = pixels.reshape(*pixels.shape, 1)
+    rows, cols = int(size_hw[0]), int(size_hw[1])
+    pixels, row0, col0 = _kernel_pixels(image, top, left, top + rows, left + cols)
     out = np.empty((int(out_hw[0]), int(out_hw[1]), pixels.shape[2]), np.uint8)
-    _area_crop(pixels, int(top), int(left), int(size_hw[0]), int(size_hw[1]), out)
+    _area_crop(pixels, int(top) - row0, int(left) - col0, rows, cols, out)
     return out if image.ndim == 3 else out[..., 0]
 
 
@@ -257,16 +271,18 @@ def area_resize_crops(
     """Crops of `image` (0-based top/left, (rows, cols) sizes, border replicated) area-shrunk to
     `out_hw`, exactly as `cv2.resize(crop, INTER_AREA)`; every crop must satisfy
     `area_path_is_generic(size, out_hw)`. Returns uint8 (N, rows, cols[, C]) like the input."""
-    pixels = np.ascontiguousarray(image)
-    if pixels.ndim == 2:
-        pixels = pixels.reshape(*pixels.shape, 1)
     count = len(tops)
-    out = np.empty((count, int(out_hw[0]), int(out_hw[1]), pixels.shape[2]), np.uint8)
     sizes = np.asarray(sizes_hw, dtype=np.int64).reshape(count, 2)
+    tops = np.asarray(tops, dtype=np.int64)
+    lefts = np.asarray(lefts, dtype=np.int64)
+    pixels, row0, col0 = _kernel_pixels(
+        image, tops.min(), lefts.min(), (tops + sizes[:, 0]).max(), (lefts + sizes[:, 1]).max()
+    )
+    out = np.empty((count, int(out_hw[0]), int(out_hw[1]), pixels.shape[2]), np.uint8)
     _area_samples(
         pixels,
-        np.asarray(tops, dtype=np.int64),
-        np.asarray(lefts, dtype=np.int64),
+        tops - row0,
+        lefts - col0,
         np.ascontiguousarray(sizes[:, 0]),
         np.ascontiguousarray(sizes[:, 1]),
         out,

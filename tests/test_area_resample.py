@@ -96,3 +96,22 @@ def test_single_crop_kernel_equals_opencv_on_large_crops():
             area_resize_crop(image, top, left, size, out),
             _opencv_sample(image, top, left, size, out),
         )
+
+
+def test_strided_frames_give_the_same_samples():
+    """A frame that is a view into a larger array (not contiguous) samples like a copy of it."""
+    base = _images()["smooth"]
+    for image in (base, base[:, :, 1]):
+        view = image[10:200, 20:300]
+        assert not view.flags.c_contiguous
+        copy = np.ascontiguousarray(view)
+        for top, left in ((-30, -40), (50, 60), (150, 250)):
+            np.testing.assert_array_equal(
+                area_resize_crop(view, top, left, (90, 70), (40, 33)),
+                area_resize_crop(copy, top, left, (90, 70), (40, 33)),
+            )
+            sizes = np.array([[90, 70], [61, 47]])
+            np.testing.assert_array_equal(
+                area_resize_crops(view, [top, top + 9], [left, left + 5], sizes, (25, 19)),
+                area_resize_crops(copy, [top, top + 9], [left, left + 5], sizes, (25, 19)),
+            )
