@@ -51,6 +51,20 @@ def area_path_is_generic(src_hw: tuple[int, int], dst_hw: tuple[int, int]) -> bo
     return not fast
 
 
+def area_paths_are_generic(sizes_hw: np.ndarray, dst_hw: tuple[int, int]) -> np.ndarray:
+    """`area_path_is_generic` for each row of an (N, 2) array of source sizes, vectorised."""
+    sizes = np.asarray(sizes_hw, dtype=np.int64).reshape(-1, 2)
+    dst_h, dst_w = int(dst_hw[0]), int(dst_hw[1])
+    scale_y = 1.0 / (dst_h / sizes[:, 0])
+    scale_x = 1.0 / (dst_w / sizes[:, 1])
+    same = (sizes[:, 0] == dst_h) & (sizes[:, 1] == dst_w)
+    shrinking = (scale_x >= 1.0) & (scale_y >= 1.0)
+    fast = (np.abs(scale_x - np.round(scale_x)) < _DBL_EPSILON) & (
+        np.abs(scale_y - np.round(scale_y)) < _DBL_EPSILON
+    )
+    return shrinking & ~same & ~fast
+
+
 @njit(cache=True, nogil=True, fastmath=False, error_model="numpy")
 def _area_taps(src_size, dst_size, first, weights, offsets):
     """computeResizeAreaTab for one axis: source index and float32 weight of every tap.

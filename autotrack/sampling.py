@@ -12,7 +12,12 @@ import math
 import cv2
 import numpy as np
 
-from autotrack.area_resample import area_path_is_generic, area_resize_crop, area_resize_crops
+from autotrack.area_resample import (
+    area_path_is_generic,
+    area_paths_are_generic,
+    area_resize_crop,
+    area_resize_crops,
+)
 
 
 def resize_auto(patch: np.ndarray, size_hw: tuple[int, int]) -> np.ndarray:
@@ -90,7 +95,7 @@ def scale_patches(
     base = np.asarray(base_target_size_hw, dtype=np.float64)
     sizes = np.maximum(np.floor(base[None, :] * factors[:, None]), 2).astype(np.int64)
     model = (int(model_size_hw[0]), int(model_size_hw[1]))
-    generic = np.array([area_path_is_generic(tuple(size), model) for size in sizes], dtype=bool)
+    generic = area_paths_are_generic(sizes, model)
     tops = math.floor(position[0]) - sizes[:, 0] // 2
     lefts = math.floor(position[1]) - sizes[:, 1] // 2
     samples = np.empty((len(factors), *model, *image.shape[2:]), np.uint8)

@@ -6,7 +6,12 @@ import cv2
 import numpy as np
 import pytest
 
-from autotrack.area_resample import area_path_is_generic, area_resize_crop, area_resize_crops
+from autotrack.area_resample import (
+    area_path_is_generic,
+    area_paths_are_generic,
+    area_resize_crop,
+    area_resize_crops,
+)
 from autotrack.sampling import crop_replicate, resize_auto, scale_patches, search_patch
 
 
@@ -51,6 +56,14 @@ def test_generic_path_excludes_the_cases_opencv_computes_otherwise():
     assert not area_path_is_generic((100, 80), (50, 40))  # integer ratio: resizeAreaFast
     assert not area_path_is_generic((100, 80), (120, 40))  # enlarging rows: bilinear variant
     assert area_path_is_generic((100, 80), (50, 30))  # integer on one axis only
+    sizes = np.array([(100, 80), (100, 80), (100, 80), (100, 80), (100, 80), (37, 41)])
+    outs = [(33, 27), (100, 80), (50, 40), (120, 40), (50, 30), (37, 40)]
+    for size, out in zip(sizes, outs, strict=True):
+        assert area_paths_are_generic(size[None], out)[0] == area_path_is_generic(size, out)
+    rng = np.random.default_rng(2)
+    many = rng.integers(2, 120, (500, 2))
+    expected = [area_path_is_generic(tuple(size), (30, 20)) for size in many]
+    np.testing.assert_array_equal(area_paths_are_generic(many, (30, 20)), expected)
 
 
 @pytest.mark.parametrize("kind", ["noise", "grey"])
