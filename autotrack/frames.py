@@ -10,9 +10,11 @@ backward steps, and a longer backward jump re-opens the video and decodes from t
 
 from __future__ import annotations
 
+import queue
+import threading
 from abc import ABC, abstractmethod
 from collections import OrderedDict
-from collections.abc import Iterator, Sequence
+from collections.abc import Iterable, Iterator, Sequence
 from functools import cached_property
 from pathlib import Path
 
@@ -216,3 +218,50 @@ def open_frames(path: str | Path) -> FrameSource:
     if path.suffix.lower() in IMAGE_EXTENSIONS:
         return ImageSequence([path], path.stem)
     return VideoFrames(path)
+
+
+def prefetch(frames: Iterable[np.ndarray], depth: int = 2) -> Iterator[np.ndarray]:
+    """Iterate `frames` with the next `depth` decoded ahead on a background thread.
+
+    Decoding (libjpeg, video codecs) releases the GIL, so with a second core the next frame is
+    ready when the trackers finish the current one. Errors are raised where the frame would have
+    been yielded; closing the iterator early stops the reader.
+    """
+    if depth < 1:
+        raise InputError(f"prefetch depth must be at least 1, got {depth}")
+    slots: queue.Queue = queue.Queue(maxsize=depth)
+    stop = threading.Event()
+    done = object()
+
+    def read() -> None:
+        try:
+            for frame in frames:
+                while not stop.is_set():
+                    try:
+                        slots.put((frame, None), timeout=0.1)
+                        break
+                    except queue.Full:
+                        continue
+                if stop.is_set():
+                    return
+            slots.put((done, None))
+        except BaseException as error:  # handed to the consumer, raised there
+            slots.put((done, error))
+
+    reader = threading.Thread(target=read, name="frame-prefetch", daemon=True)
+    reader.start()
+    try:
+        while True:
+            item, error = slots.get()
+            if item is done:
+                if error is not None:
+                    raise error
+                return
+            yield item
+    finally:
+        stop.set()
+        while reader.is_alive():
+            try:
+                slots.get_nowait()
+            except queue.Empty:
+                reader.join(timeout=0.05)

@@ -126,3 +126,38 @@ def test_real_benchmark_sequence():
     assert len(source) == 120
     assert source.frame_size == (360, 240)
     assert source.read(119).shape == (240, 360, 3)
+
+
+def test_prefetch_yields_every_frame_in_order_and_forwards_errors():
+    from autotrack.frames import prefetch
+
+    frames = [np.full((4, 4), i, np.uint8) for i in range(7)]
+    assert [int(f[0, 0]) for f in prefetch(iter(frames), depth=2)] == list(range(7))
+
+    def failing():
+        yield frames[0]
+        raise InputError("frame 1: cannot decode")
+
+    reader = prefetch(failing())
+    assert int(next(reader)[0, 0]) == 0
+    with pytest.raises(InputError, match="cannot decode"):
+        next(reader)
+
+
+def test_prefetch_stops_its_reader_when_closed_early():
+    import threading
+
+    from autotrack.frames import prefetch
+
+    produced = []
+
+    def endless():
+        while True:
+            produced.append(len(produced))
+            yield np.zeros((2, 2), np.uint8)
+
+    reader = prefetch(endless(), depth=1)
+    next(reader)
+    reader.close()
+    assert not any(t.name == "frame-prefetch" and t.is_alive() for t in threading.enumerate())
+    assert len(produced) <= 4

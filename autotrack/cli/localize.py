@@ -82,8 +82,8 @@ def _add_localize(subparsers: argparse._SubParsersAction) -> None:
         "--threads",
         type=int,
         default=2,
-        help="track the landmarks on this many threads (default 2: 28.8 fps instead of 22.4 "
-        "for four targets at 1280x720 on a 2-core machine)",
+        help="track the landmarks on this many threads, the next frame decoded meanwhile "
+        "(default 2; docs/benchmarks.md has the frame rates for 1 and 2 threads)",
     )
     parser.add_argument(
         "--max-rms",
@@ -144,7 +144,7 @@ def _default_file(given: Path | None, sequence: Path, name: str, option: str) ->
 def run_localize(args: argparse.Namespace) -> int:
     from dataclasses import replace
 
-    from autotrack.frames import open_frames
+    from autotrack.frames import open_frames, prefetch
     from autotrack.localize import LocalizerParams, localize_sequence
 
     scene_path = _default_file(args.scene, args.sequence, "scene.json", "--scene")
@@ -174,7 +174,8 @@ def run_localize(args: argparse.Namespace) -> int:
     progress = tqdm(total=len(frames), unit="frame", desc=frames.name, disable=args.quiet)
     with frames, progress, recorder or contextlib.nullcontext():
         pipeline = localize_sequence(
-            frames,
+            # with a second thread, the next frame is decoded while this one is tracked
+            prefetch(iter(frames)) if args.threads > 1 else frames,
             scene,
             init,
             tracker_params,
