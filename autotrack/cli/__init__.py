@@ -9,7 +9,7 @@ import sys
 from autotrack.errors import AutoTrackError
 
 # Each module defines `add_parser(subparsers)`; the parser it adds sets `func`.
-_COMMAND_MODULES = ("track", "bench", "localize", "session", "app")
+_COMMAND_MODULES = ("track", "bench", "sweep", "localize", "session", "app")
 
 
 def build_parser() -> argparse.ArgumentParser:
