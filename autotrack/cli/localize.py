@@ -16,7 +16,9 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 from tqdm import tqdm
 
+from autotrack.cli.live import add_live_arguments, check_source, run_localize_live
 from autotrack.errors import BoxError, InputError
+from autotrack.live import source_argument
 from autotrack.params import PRESETS, TrackerParams, preset
 from autotrack.scene import Scene, load_scene, scene_warnings
 
@@ -48,7 +50,12 @@ def _add_localize(subparsers: argparse._SubParsersAction) -> None:
             "See docs/localization.md."
         ),
     )
-    parser.add_argument("sequence", type=Path, help="folder of images, video, or sequence folder")
+    parser.add_argument(
+        "sequence",
+        type=source_argument,
+        help="folder of images, video, or sequence folder; with --realtime a camera index, "
+        "stream URL or video",
+    )
     parser.add_argument(
         "--scene",
         type=Path,
@@ -101,6 +108,7 @@ def _add_localize(subparsers: argparse._SubParsersAction) -> None:
         "`autotrack session`)",
     )
     parser.add_argument("--quiet", action="store_true", help="no progress bar")
+    add_live_arguments(parser)
     parser.set_defaults(func=run_localize)
 
 
@@ -132,11 +140,11 @@ def read_init_boxes(path: Path) -> dict[str, tuple[float, float, float, float]] 
     raise InputError(f"{path}: expected {{landmark id: [x, y, w, h]}} or a list of boxes")
 
 
-def _default_file(given: Path | None, sequence: Path, name: str, option: str) -> Path:
+def _default_file(given: Path | None, sequence: Path | str, name: str, option: str) -> Path:
     if given is not None:
         return given
-    candidate = sequence / name
-    if sequence.is_dir() and candidate.is_file():
+    candidate = Path(sequence) / name
+    if Path(sequence).is_dir() and candidate.is_file():
         return candidate
     raise InputError(f"give {option} (no {name} in {sequence})")
 
@@ -164,6 +172,17 @@ def run_localize(args: argparse.Namespace) -> int:
         from autotrack.localize import read_tum
 
         gt = read_tum(args.gt)
+    check_source(args)
+    if args.realtime:
+        return run_localize_live(
+            args,
+            scene=scene,
+            scene_path=scene_path,
+            init=init,
+            tracker_params=preset(args.preset),
+            localizer_params=localizer_params,
+            gt=gt,
+        )
     frames = open_frames(args.sequence)
     fps = args.fps or frames.fps or DEFAULT_FPS
     if fps <= 0:
