@@ -105,9 +105,12 @@ class LiveReader:
         self.source = source
         self._capture, self._paced = _open_capture(source)
         header_fps = float(self._capture.get(cv2.CAP_PROP_FPS) or 0.0)
-        self.fps: float | None = fps or (
+        self.source_fps: float | None = (
             header_fps if np.isfinite(header_fps) and header_fps > 0 else None
         )
+        """The frame rate the source announces (a video's header), None when it does not."""
+        self.fps: float | None = fps or self.source_fps
+        """The rate a video file is played at: `fps` if given, else its header's."""
         if self._paced and self.fps is None:
             raise InputError(f"{source} has no frame rate in its header: give --fps")
         self._clock, self._sleep = clock, sleep

@@ -123,9 +123,15 @@ def run_localize_live(
                     _record_frame(recorder, record, scene)
                 progress.update()
     summary = log.summary()
-    timestamps = np.array([frame.capture_time for frame in summary.processed])
+    capture_times = np.array([frame.capture_time for frame in summary.processed])
     name = describe_source(args.sequence)
-    print(summarise(records, timestamps, scene, args.out, args.tracks, gt, name))
+    print(summarise(records, capture_times, scene, args.out, args.tracks, None, name))
+    if gt is not None:
+        # The ground truth is timed by the source's frames: match by capture index / fps.
+        source_fps = reader.source_fps or fps
+        frame_times = np.array([record.frame_index for record in records]) / source_fps
+        table = summarise(records, frame_times, scene, None, None, gt, name)
+        print(table.split("\n", 1)[1])
     if args.session is not None:
         print(f"session recorded to {args.session}")
     _finish(summary, args.frame_log)
