@@ -15,6 +15,7 @@ from autotrack.datasets import read_boxes
 from autotrack.frames import open_frames
 from autotrack.live import LiveLog, LiveReader, source_argument
 from autotrack.localize import read_tum
+from autotrack.sessions import open_session
 from tests.sequences import moving_target_sequence
 
 VIDEO_FPS = 20.0
@@ -123,7 +124,7 @@ def test_localize_realtime_writes_poses_at_the_capture_times(tmp_path, capsys) -
     poses, log = tmp_path / "poses.tum", tmp_path / "frames.csv"
     argv = ["localize", str(video), "--realtime", "--quiet", "--out", str(poses), "--fps", "4"]
     argv += ["--scene", str(folder / "scene.json"), "--init", str(folder / "boxes.json")]
-    argv += ["--gt", str(folder / "poses_gt.tum")]
+    argv += ["--gt", str(folder / "poses_gt.tum"), "--session", str(tmp_path / "live.mcap")]
     assert main([*argv, "--frame-log", str(log), "--tracks", str(tmp_path / "t.csv")]) == 0
     printed = capsys.readouterr().out
     assert "live: 10 frames captured" in printed
@@ -141,6 +142,11 @@ def test_localize_realtime_writes_poses_at_the_capture_times(tmp_path, capsys) -
     with (tmp_path / "t.csv").open() as handle:
         tracks = list(csv.DictReader(handle))
     assert [int(row["frame"]) for row in tracks] == [int(row["frame"]) for row in rows]
+    # The session holds the processed frames' images (a live source cannot be replayed).
+    session = open_session(tmp_path / "live.mcap")
+    assert session.image_count == len(rows)
+    recorded = np.flatnonzero(np.isfinite(next(iter(session.tracks.values()))).all(axis=1))
+    assert recorded.tolist() == [int(row["frame"]) for row in rows]
     # Frames are numbered by capture index: each valid pose is near that frame's true pose.
     _, truth, _ = read_tum(folder / "poses_gt.tum")
     valid = [row for row in tracks if row["valid"] == "1"]

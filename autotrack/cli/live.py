@@ -80,6 +80,25 @@ def run_track_live(args: argparse.Namespace, params: Any, init_box: np.ndarray |
     return 0
 
 
+def _open_live_recorder(
+    args: argparse.Namespace, tracker_params: Any, scene_path: Path, fps: float
+) -> Any:
+    """The --session recorder of a live run: the processed frames are embedded (JPEG), since a
+    live source cannot be replayed."""
+    if args.session is None:
+        return None
+    from autotrack.sessions import SessionRecorder
+
+    return SessionRecorder(
+        args.session,
+        source=str(args.sequence),
+        tracker_params=tracker_params,
+        scene_path=scene_path,
+        fps=fps,
+        embed_frames=True,
+    )
+
+
 def run_localize_live(
     args: argparse.Namespace,
     *,
@@ -92,7 +111,7 @@ def run_localize_live(
 ) -> int:
     """`autotrack localize SOURCE --realtime`: poses of the processed frames, TUM timestamps =
     capture times, frames numbered by capture index."""
-    from autotrack.cli.localize import DEFAULT_FPS, _open_recorder, _record_frame, summarise
+    from autotrack.cli.localize import DEFAULT_FPS, _record_frame, summarise
     from autotrack.live import LiveLog, LiveReader, describe_source, warm_up, with_capture_index
     from autotrack.localize import localize_sequence
 
@@ -104,7 +123,7 @@ def run_localize_live(
     progress = tqdm(unit="frame", desc=describe_source(args.sequence), disable=args.quiet)
     with reader, progress:
         fps = reader.fps or DEFAULT_FPS
-        recorder = _open_recorder(args.session, args.sequence, tracker_params, scene_path, fps)
+        recorder = _open_live_recorder(args, tracker_params, scene_path, fps)
         log = LiveLog(reader)
         with recorder or contextlib.nullcontext():
             pipeline = localize_sequence(
@@ -117,9 +136,11 @@ def run_localize_live(
                 threads=args.threads,
             )
             for record in pipeline:
-                record = with_capture_index(record, log.result_ready().index)
+                frame = log.result_ready()
+                record = with_capture_index(record, frame.index)
                 records.append(record)
                 if recorder is not None:
+                    recorder.log_frame(frame.index, frame.image)
                     _record_frame(recorder, record, scene)
                 progress.update()
     summary = log.summary()
