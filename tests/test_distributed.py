@@ -233,3 +233,15 @@ def test_run_combination_tracks_with_the_combination_parameters(synthetic_root):
     np.testing.assert_array_equal(default.boxes, run_task("autotrack", sequence).boxes)
     one_step = run_combination("admm_iterations=1", TrackerParams(admm_iterations=1), sequence)
     assert np.abs(one_step.boxes - default.boxes).max() > 1.0
+
+
+def test_sweep_in_local_processes_matches_the_inline_sweep(synthetic_root, tmp_path):
+    sequences = limit_frames(load_sequences(synthetic_root), 5)
+    combinations = grid_combinations(TrackerParams(), parse_grid(["admm_iterations=1,4"]))
+    inline = run_sweep(sequences, combinations, tmp_path / "inline", progress=False)
+    pooled = run_sweep(sequences, combinations, tmp_path / "pool", jobs=2, progress=False)
+    assert pooled.benchmark.computed == inline.benchmark.computed == 4
+    for key, result in inline.benchmark.results.items():
+        np.testing.assert_array_equal(pooled.benchmark.results[key].boxes, result.boxes)
+    with pytest.raises(InputError, match="--jobs must be at least 1"):
+        run_sweep(sequences, combinations, tmp_path / "bad", jobs=0, progress=False)
