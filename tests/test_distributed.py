@@ -7,6 +7,7 @@ import csv
 import json
 import re
 import socket
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -245,3 +246,12 @@ def test_sweep_in_local_processes_matches_the_inline_sweep(synthetic_root, tmp_p
         np.testing.assert_array_equal(pooled.benchmark.results[key].boxes, result.boxes)
     with pytest.raises(InputError, match="--jobs must be at least 1"):
         run_sweep(sequences, combinations, tmp_path / "bad", jobs=0, progress=False)
+
+
+def test_scheduler_without_dask_installed_names_the_extra(monkeypatch):
+    monkeypatch.setitem(sys.modules, "distributed", None)  # as if the extra were not installed
+    with (
+        pytest.raises(ClusterError, match=r"pip install 'autotrack-studio\[cluster\]'"),
+        cluster_executor("tcp://127.0.0.1:8786"),
+    ):
+        pass
