@@ -70,7 +70,7 @@ def cluster_executor(
     not halfway through a run. The client is closed on exit; the cluster keeps running.
     """
     try:
-        from distributed import Client
+        from distributed import Client, KilledWorker
     except ImportError as error:
         raise ClusterError(f"--scheduler needs Dask distributed: {INSTALL_HINT}") from error
     import autotrack
@@ -110,6 +110,11 @@ def cluster_executor(
         executor = client.get_executor(pure=False)
         try:
             yield executor
+        except KilledWorker as error:
+            raise ClusterError(
+                f"a Dask worker died while running {error.task} (out of memory, or killed); "
+                f"the runs saved so far are kept: rerun the same command to resume"
+            ) from None
         finally:
             executor.shutdown(wait=False)
     finally:

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import csv
 import json
+import os
 import re
 import socket
 import sys
@@ -255,3 +256,17 @@ def test_scheduler_without_dask_installed_names_the_extra(monkeypatch):
         cluster_executor("tcp://127.0.0.1:8786"),
     ):
         pass
+
+
+def test_a_worker_dying_mid_run_is_one_cluster_error():
+    import dask
+
+    with (
+        dask.config.set({"distributed.scheduler.allowed-failures": 0}),
+        distributed.LocalCluster(
+            n_workers=1, threads_per_worker=1, host="127.0.0.1", dashboard_address=None
+        ) as doomed,
+        pytest.raises(ClusterError, match="a Dask worker died while running .*rerun the same"),
+        cluster_executor(doomed.scheduler_address) as executor,
+    ):
+        executor.submit(os._exit, 1).result()  # the worker process exits under the task
