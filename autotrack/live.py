@@ -201,11 +201,13 @@ class LiveReader:
         return self._clock() - self.started_at
 
     def close(self) -> None:
-        """Stop the thread and release the source."""
+        """Stop the thread and release the source (left to the process's exit if a stalled
+        stream keeps the thread in a read for longer than OPEN_TIMEOUT_S)."""
         self._stop = True
         if self._thread.is_alive():
-            self._thread.join()
-        self._capture.release()
+            self._thread.join(timeout=OPEN_TIMEOUT_S)
+        if not self._thread.is_alive():
+            self._capture.release()
 
     def __enter__(self) -> LiveReader:
         return self.start()
