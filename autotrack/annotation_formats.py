@@ -161,7 +161,7 @@ def write_cvat_video(
 
     `keyframes`: target id -> frames the user drew or corrected (keyframe="1"; the first box of
     each visible stretch is always one). `all_keyframes`: every box is a keyframe. `frame_size`
-    (width, height) fills `<original_size>`. `label`: one label for every track; by default
+    (width, height) fills `<original_size>` (CVAT's readers expect it for video tasks). `label`: one label for every track; by default
     each track's label is its target id (CVAT needs the labels to exist in the task).
     """
     frame_count = max((len(boxes) for boxes in tracks.values()), default=0)
@@ -334,20 +334,35 @@ def export_session_mot(session: Session, path: str | Path, *, overwrite: bool = 
 
 
 def export_session_cvat(
-    session: Session, path: str | Path, *, overwrite: bool = False, all_keyframes: bool = False
+    session: Session,
+    path: str | Path,
+    *,
+    overwrite: bool = False,
+    all_keyframes: bool = False,
+    frame_size: tuple[int, int] | None = None,
 ) -> Path:
     """The session's tracks as CVAT for video 1.1 XML, the user's drawn and corrected frames as
-    keyframes (every box with `all_keyframes`)."""
+    keyframes (every box with `all_keyframes`).
+
+    `frame_size` (width, height) defaults to the size of the session's source frames; CVAT's
+    readers need it (<original_size>), so SessionError when neither is available.
+    """
     path = Path(path)
     _refuse_existing(path, overwrite)
+    frame_size = frame_size or session_frame_size(session)
     source = str(session.metadata.get("source") or session.path.stem)
+    if frame_size is None:
+        raise SessionError(
+            f"the session's source {source} cannot be read here to get the frame size CVAT "
+            "needs: give --frame-size WIDTHxHEIGHT"
+        )
     try:
         return write_cvat_video(
             path,
             {t: session.tracks[t] for t in session.exported_targets},
             keyframes=session_keyframes(session),
             all_keyframes=all_keyframes,
-            frame_size=session_frame_size(session),
+            frame_size=frame_size,
             task_name=Path(source).name or source,
         )
     except OSError as error:

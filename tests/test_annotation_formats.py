@@ -180,18 +180,26 @@ def test_session_export_writes_mot_and_cvat_with_the_corrected_frames_as_keyfram
     session = open_session(session_path)
     mot, cvat = tmp_path / "tracks.mot.txt", tmp_path / "tracks.xml"
     argv = ["session", "export", str(session_path), "--mot", str(mot), "--cvat", str(cvat)]
+    assert main(argv) == 2  # the recorded source is not on disk: the frame size is unknown
+    assert "give --frame-size WIDTHxHEIGHT" in capsys.readouterr().err
+    assert not cvat.exists()
+    assert main([*argv, "--frame-size", "320x240x"]) == 2
+    assert "--frame-size must be WIDTHxHEIGHT" in capsys.readouterr().err
+    argv += ["--frame-size", "320x240", "--force"]
     assert main(argv) == 0
     printed = capsys.readouterr().out
     assert "(MOT ids: t1=1, t2=2)" in printed  # t3 was deleted by the user
     read = read_mot(mot, len(session.frame_indices))
     np.testing.assert_allclose(read[1], session.tracks["t1"], atol=0.005)
     np.testing.assert_allclose(read[2], session.tracks["t2"], atol=0.005)
-    _, tracks = read_cvat_video(cvat)
+    meta, tracks = read_cvat_video(cvat)
+    root = ElementTree.parse(cvat).getroot()
+    assert root.findtext("meta/task/original_size/width") == "320"
     assert [track.label for track in tracks] == ["t1", "t2"]
     np.testing.assert_allclose(tracks[0].boxes, session.tracks["t1"], atol=0.005)
     assert tracks[0].keyframes == {0, 20}  # drawn at 0, corrected at 20
     assert tracks[1].keyframes == {0}
-    assert main(argv) == 2
+    assert main(argv[:-1]) == 2  # without --force
     assert "already exists" in capsys.readouterr().err
 
 

@@ -58,6 +58,13 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
         help="mark every box a keyframe (CVAT keeps only keyframes on import)",
     )
     export.add_argument(
+        "--frame-size",
+        type=str,
+        default=None,
+        metavar="WxH",
+        help="frame size for --cvat when the session's source is not readable here",
+    )
+    export.add_argument(
         "--evo", action="store_true", help="print evo's APE command for --poses against --gt"
     )
     export.add_argument(
@@ -169,6 +176,15 @@ def run_export(args: argparse.Namespace) -> int:
     if args.evo and args.poses is None:
         raise SessionError("--evo prints the command for the exported poses: give --poses FILE")
     session = open_session(args.file)
+    if args.cvat is not None:  # before writing anything: the frame size CVAT needs
+        from autotrack.annotation_formats import session_frame_size
+
+        args.frame_size = _frame_size(args.frame_size) or session_frame_size(session)
+        if args.frame_size is None:
+            raise SessionError(
+                f"the session's source {session.metadata.get('source')} cannot be read here "
+                "to get the frame size CVAT needs: give --frame-size WIDTHxHEIGHT"
+            )
     if session.truncated:
         print(f"note: {args.file} was cut short; exporting what was recorded before the cut")
     if args.tracks is not None:
@@ -182,6 +198,18 @@ def run_export(args: argparse.Namespace) -> int:
         print(f"wrote {count} valid pose(s) to {args.poses}")
     _export_interchange(session, args)
     return 0
+
+
+def _frame_size(text: str | None) -> tuple[int, int] | None:
+    """'1280x720' -> (1280, 720); SessionError for anything else."""
+    if text is None:
+        return None
+    width, _, height = text.lower().partition("x")
+    if not (width.isdigit() and height.isdigit() and int(width) > 0 and int(height) > 0):
+        raise SessionError(
+            f"--frame-size must be WIDTHxHEIGHT in pixels (e.g. 1280x720), got {text!r}"
+        )
+    return (int(width), int(height))
 
 
 def _export_interchange(session: Session, args: argparse.Namespace) -> None:
@@ -198,7 +226,11 @@ def _export_interchange(session: Session, args: argparse.Namespace) -> None:
         print(f"wrote {args.mot} (MOT ids: {mapping})")
     if args.cvat is not None:
         export_session_cvat(
-            session, args.cvat, overwrite=args.force, all_keyframes=args.cvat_all_keyframes
+            session,
+            args.cvat,
+            overwrite=args.force,
+            all_keyframes=args.cvat_all_keyframes,
+            frame_size=args.frame_size,
         )
         print(f"wrote {args.cvat} (CVAT for video 1.1)")
     if args.evo:
