@@ -12,14 +12,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from autotrack.annotation_formats import (
-    read_cvat_video,
-    read_mot,
-    write_cvat_video,
-    write_mot,
-)
 from autotrack.cli import main
 from autotrack.errors import InputError
+from autotrack.io.cvat import read_cvat_video, write_cvat_video
+from autotrack.io.mot import read_mot, write_mot
 from autotrack.sessions import open_session
 from tests.test_sessions import FPS, _record
 
@@ -230,7 +226,7 @@ def test_tum_poses_read_in_evo_and_the_printed_evo_command_runs(
     np.testing.assert_allclose(trajectory.orientations_quat_wxyz, expected, atol=1e-6)
 
     # A ground truth 5 cm off along x: evo's APE of the printed command is 0.05 m.
-    from autotrack.localize import write_tum
+    from autotrack.io.tum import write_tum
 
     write_tum(
         gt,

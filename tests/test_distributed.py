@@ -15,11 +15,10 @@ import numpy as np
 import pytest
 
 from autotrack.cli import main
-from autotrack.datasets import load_sequences
-from autotrack.distributed import ClusterError, cluster_executor, normalise_address
 from autotrack.errors import InputError
-from autotrack.params import TrackerParams
-from autotrack.sweep import (
+from autotrack.evaluation.datasets import load_sequences
+from autotrack.evaluation.distributed import ClusterError, cluster_executor, normalise_address
+from autotrack.evaluation.sweep import (
     GridAxis,
     grid_combinations,
     limit_frames,
@@ -27,6 +26,7 @@ from autotrack.sweep import (
     run_sweep,
     sweep_rows,
 )
+from autotrack.params import TrackerParams
 from tests.test_benchmark import _write_moving_square
 
 distributed = pytest.importorskip("distributed", reason="the [cluster] extra is not installed")
@@ -226,8 +226,8 @@ def test_sweep_refuses_a_folder_of_other_parameters_and_resumes_its_own(syntheti
 
 
 def test_run_combination_tracks_with_the_combination_parameters(synthetic_root):
-    from autotrack.benchmark import run_task
-    from autotrack.sweep import run_combination
+    from autotrack.evaluation.benchmark import run_task
+    from autotrack.evaluation.sweep import run_combination
 
     sequence = limit_frames(load_sequences(synthetic_root), 6)[0]
     default = run_combination("default", TrackerParams(), sequence)

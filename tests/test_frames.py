@@ -9,9 +9,8 @@ import numpy as np
 import pytest
 
 from autotrack.errors import InputError
-from autotrack.frames import ImageSequence, VideoFrames, open_frames
-
-SHARED = Path(__file__).resolve().parents[1] / ".." / "shared" / "data" / "sequences"
+from autotrack.io.frames import ImageSequence, VideoFrames, open_frames
+from tests.conftest import shared_sequence_dir
 
 
 def _write_frames(folder: Path, count: int, size_wh=(32, 24)) -> list[np.ndarray]:
@@ -119,9 +118,7 @@ def test_single_image_file_is_a_one_frame_source(tmp_path):
 
 
 def test_real_benchmark_sequence():
-    folder = SHARED / "OTB" / "Crossing"
-    if not folder.is_dir():
-        pytest.skip("shared data not available")
+    folder = shared_sequence_dir("OTB", "Crossing")
     source = open_frames(folder)
     assert len(source) == 120
     assert source.frame_size == (360, 240)

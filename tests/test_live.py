@@ -11,10 +11,10 @@ import numpy as np
 import pytest
 
 from autotrack.cli import main
-from autotrack.datasets import read_boxes
-from autotrack.frames import open_frames
-from autotrack.live import LiveLog, LiveReader, source_argument
-from autotrack.localize import read_tum
+from autotrack.io.frames import open_frames
+from autotrack.io.live import LiveLog, LiveReader, source_argument
+from autotrack.io.otb_boxes import read_boxes
+from autotrack.io.tum import read_tum
 from autotrack.sessions import open_session
 from tests.sequences import moving_target_sequence
 
@@ -115,7 +115,8 @@ def test_track_realtime_reports_every_captured_frame(video, tmp_path, capsys) ->
 
 
 def test_localize_realtime_writes_poses_at_the_capture_times(tmp_path, capsys) -> None:
-    from autotrack.synthetic import RenderSettings, SequenceSpec, render_sequence
+    from autotrack.synthetic.renderer import render_sequence
+    from autotrack.synthetic.trajectories import RenderSettings, SequenceSpec
 
     spec = SequenceSpec("s", "circle", 10, 0, RenderSettings(width=640, height=360), period_s=45.0)
     folder = render_sequence(tmp_path / "synthetic", spec)

@@ -6,7 +6,7 @@ import argparse
 import json
 from pathlib import Path
 
-from autotrack.peers import TRACKER_NAMES
+from autotrack.evaluation.peers import TRACKER_NAMES
 
 DEFAULT_TRACKERS = ",".join(TRACKER_NAMES)
 
@@ -70,7 +70,8 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
 
 def run(args: argparse.Namespace) -> int:
     """Run the benchmark described by the parsed arguments."""
-    from autotrack.benchmark import (
+    from autotrack.errors import InputError
+    from autotrack.evaluation.benchmark import (
         format_table,
         run_benchmark,
         summarize_run,
@@ -78,9 +79,8 @@ def run(args: argparse.Namespace) -> int:
         validate_tracker_names,
         write_run_plots,
     )
-    from autotrack.datasets import load_sequences
-    from autotrack.distributed import cluster_executor_for
-    from autotrack.errors import InputError
+    from autotrack.evaluation.datasets import load_sequences
+    from autotrack.evaluation.distributed import cluster_executor_for
 
     trackers = validate_tracker_names(args.trackers.split(","))
     if args.jobs < 1:

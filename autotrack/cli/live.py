@@ -7,7 +7,6 @@ Not a command of its own: `track` and `localize` add these options and hand over
 from __future__ import annotations
 
 import argparse
-import contextlib
 from pathlib import Path
 from typing import Any
 
@@ -37,7 +36,7 @@ def add_live_arguments(parser: argparse.ArgumentParser) -> None:
 
 def check_source(args: argparse.Namespace) -> None:
     """Refuse camera indices and streams without --realtime, and --frame-log without it."""
-    from autotrack.live import describe_source, is_live_only
+    from autotrack.io.live import describe_source, is_live_only
 
     if not args.realtime and is_live_only(args.sequence):
         raise InputError(f"{describe_source(args.sequence)} is live input: add --realtime")
@@ -46,7 +45,7 @@ def check_source(args: argparse.Namespace) -> None:
 
 
 def _finish(summary: Any, frame_log: Path | None) -> None:
-    from autotrack.live import write_frame_log
+    from autotrack.io.live import write_frame_log
 
     print(summary.describe())
     if frame_log is not None:
@@ -58,19 +57,18 @@ def _finish(summary: Any, frame_log: Path | None) -> None:
 def run_track_live(args: argparse.Namespace, params: Any, init_box: np.ndarray | None) -> int:
     """`autotrack track SOURCE --realtime`: boxes of the processed frames, NaN rows for the
     dropped ones, and the drop/latency report."""
-    from autotrack.datasets import write_boxes
-    from autotrack.live import LiveReader, describe_source, track_live, warm_up
-    from autotrack.tracker import AutoTrack
+    from autotrack.io.live import LiveReader, describe_source
+    from autotrack.io.otb_boxes import write_boxes
+    from autotrack.pipeline.live import track_live, warm_up
 
     if init_box is None:
         raise InputError("live input has no ground truth: give the initial box with --init x,y,w,h")
-    tracker = AutoTrack(params)
     reader = LiveReader(args.sequence, fps=args.fps)
     warm_up(params, reader.frame_size, [init_box])
     progress = tqdm(unit="frame", desc=describe_source(args.sequence), disable=args.quiet)
     with reader, progress:
         boxes, summary = track_live(
-            reader, tracker, init_box, on_result=lambda frame, result: progress.update()
+            reader, params, init_box, on_result=lambda frame, outcome: progress.update()
         )
     if args.out is not None:
         args.out.parent.mkdir(parents=True, exist_ok=True)
@@ -80,22 +78,15 @@ def run_track_live(args: argparse.Namespace, params: Any, init_box: np.ndarray |
     return 0
 
 
-def _open_live_recorder(
-    args: argparse.Namespace, tracker_params: Any, scene_path: Path, fps: float
-) -> Any:
-    """The --session recorder of a live run: the processed frames are embedded (JPEG), since a
-    live source cannot be replayed."""
+def _live_recording(args: argparse.Namespace, scene_path: Path) -> Any:
+    """The --session recording of a live run: the processed frames are embedded (JPEG), since
+    a live source cannot be replayed."""
     if args.session is None:
         return None
-    from autotrack.sessions import SessionRecorder
+    from autotrack.pipeline import Recording
 
-    return SessionRecorder(
-        args.session,
-        source=str(args.sequence),
-        tracker_params=tracker_params,
-        scene_path=scene_path,
-        fps=fps,
-        embed_frames=True,
+    return Recording(
+        source=str(args.sequence), path=args.session, scene_path=scene_path, embed_frames=True
     )
 
 
@@ -111,45 +102,38 @@ def run_localize_live(
 ) -> int:
     """`autotrack localize SOURCE --realtime`: poses of the processed frames, TUM timestamps =
     capture times, frames numbered by capture index."""
-    from autotrack.cli.localize import DEFAULT_FPS, _record_frame, summarise
-    from autotrack.live import LiveLog, LiveReader, describe_source, warm_up, with_capture_index
-    from autotrack.localize import localize_sequence
+    from autotrack.cli.localize import DEFAULT_FPS, summarise
+    from autotrack.io.live import LiveLog, LiveReader, describe_source
+    from autotrack.localization.pnp import boxes_by_landmark
+    from autotrack.pipeline.live import run_live, warm_up
 
-    records = []
+    boxes = boxes_by_landmark(init, scene)
     reader = LiveReader(args.sequence, fps=args.fps)
-    warm_up(
-        tracker_params, reader.frame_size, list(init.values() if isinstance(init, dict) else init)
-    )
+    warm_up(tracker_params, reader.frame_size, list(boxes.values()))
     progress = tqdm(unit="frame", desc=describe_source(args.sequence), disable=args.quiet)
+    records = []
     with reader, progress:
-        fps = reader.fps or DEFAULT_FPS
-        recorder = _open_live_recorder(args, tracker_params, scene_path, fps)
         log = LiveLog(reader)
-        with recorder or contextlib.nullcontext():
-            pipeline = localize_sequence(
-                log.images(),
-                scene,
-                init,
-                tracker_params,
-                localizer_params,
-                assignment_known=isinstance(init, dict),
-                threads=args.threads,
-            )
-            for record in pipeline:
-                frame = log.result_ready()
-                record = with_capture_index(record, frame.index)
-                records.append(record)
-                if recorder is not None:
-                    recorder.log_frame(frame.index, frame.image)
-                    _record_frame(recorder, record, scene)
-                progress.update()
+        outcomes = run_live(
+            log,
+            tracker_params,
+            lambda pipeline, frame_index: pipeline.add_targets(frame_index, boxes),
+            scene=scene,
+            localizer_params=localizer_params,
+            recording=_live_recording(args, scene_path),
+            fps=reader.fps or DEFAULT_FPS,
+            threads=args.threads,
+        )
+        for _, outcome in outcomes:
+            records.append(outcome)
+            progress.update()
     summary = log.summary()
     capture_times = np.array([frame.capture_time for frame in summary.processed])
     name = describe_source(args.sequence)
     print(summarise(records, capture_times, scene, args.out, args.tracks, None, name))
     if gt is not None:
         # The ground truth is timed by the source's frames: match by capture index / fps.
-        source_fps = reader.source_fps or fps
+        source_fps = reader.source_fps or reader.fps or DEFAULT_FPS
         frame_times = np.array([record.frame_index for record in records]) / source_fps
         table = summarise(records, frame_times, scene, None, None, gt, name)
         print(table.split("\n", 1)[1])

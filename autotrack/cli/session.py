@@ -177,7 +177,7 @@ def run_export(args: argparse.Namespace) -> int:
         raise SessionError("--evo prints the command for the exported poses: give --poses FILE")
     session = open_session(args.file)
     if args.cvat is not None:  # before writing anything: the frame size CVAT needs
-        from autotrack.annotation_formats import session_frame_size
+        from autotrack.sessions.exports import session_frame_size
 
         args.frame_size = _frame_size(args.frame_size) or session_frame_size(session)
         if args.frame_size is None:
@@ -213,8 +213,8 @@ def _frame_size(text: str | None) -> tuple[int, int] | None:
 
 
 def _export_interchange(session: Session, args: argparse.Namespace) -> None:
-    """--mot, --cvat and --evo (autotrack.annotation_formats)."""
-    from autotrack.annotation_formats import (
+    """--mot, --cvat and --evo (autotrack.sessions.exports)."""
+    from autotrack.sessions.exports import (
         evo_ape_command,
         export_session_cvat,
         export_session_mot,

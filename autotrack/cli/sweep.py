@@ -63,11 +63,10 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
 
 def run(args: argparse.Namespace) -> int:
     """Run the sweep described by the parsed arguments."""
-    from autotrack.datasets import load_sequences
-    from autotrack.distributed import cluster_executor_for
     from autotrack.errors import InputError
-    from autotrack.params import preset
-    from autotrack.sweep import (
+    from autotrack.evaluation.datasets import load_sequences
+    from autotrack.evaluation.distributed import cluster_executor_for
+    from autotrack.evaluation.sweep import (
         format_markdown,
         grid_combinations,
         limit_frames,
@@ -76,6 +75,7 @@ def run(args: argparse.Namespace) -> int:
         sweep_rows,
         write_outputs,
     )
+    from autotrack.params import preset
 
     if args.colour_table is not None and not args.colour_table.is_file():
         raise InputError(f"colour table not found: {args.colour_table}")
