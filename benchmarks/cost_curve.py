@@ -64,8 +64,8 @@ def measure_point(width: int, height: int, side: float, targets: int, threads: i
     """Runs in the child process: mean ms per frame of the update calls, peak RSS in MB."""
     import cv2
 
-    from autotrack.multi import MultiTracker
     from autotrack.params import preset
+    from autotrack.tracker.multi import MultiTracker
 
     cv2.setNumThreads(1)
     source = _SlidingTexture(width, height, frames)

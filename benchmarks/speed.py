@@ -48,7 +48,7 @@ def guarded_sequences(max_frames: int | None):
     """The dev sequences with kept reference boxes, optionally cut to their first frames."""
     from dataclasses import replace
 
-    from autotrack.datasets import load_sequences
+    from autotrack.evaluation.datasets import load_sequences
 
     kept = {path.stem for path in REFERENCE.glob("*/*.txt")}
     sequences = [s for s in load_sequences(SHARED / "sequences") if s.name in kept]
@@ -66,7 +66,7 @@ def guarded_sequences(max_frames: int | None):
 
 def single_target(trackers: list[str], repeats: int, max_frames: int | None) -> dict:
     """{tracker: {sequence: [fps per repeat]}} and AutoTrack's boxes of the first repeat."""
-    from autotrack.benchmark import run_task
+    from autotrack.evaluation.benchmark import run_task
 
     fps: dict[str, dict[str, list[float]]] = {t: {} for t in trackers}
     boxes = {}
@@ -104,7 +104,8 @@ def print_single_target(result: dict) -> None:
 
 
 def render_multi_sequence(folder: Path, frames: int) -> Path:
-    from autotrack.synthetic import render_sequence, sequence_specs
+    from autotrack.synthetic.renderer import render_sequence
+    from autotrack.synthetic.testbed import sequence_specs
 
     spec = sequence_specs(1, frames=frames, seed=MULTI_SEED)[0]
     return render_sequence(folder / spec.name, spec)
@@ -114,10 +115,10 @@ def multi_target_pose(sequence: Path, threads: int) -> dict:
     """Four targets + pose from the JPEG files: seconds per frame, decoding included."""
     import cv2
 
-    from autotrack.frames import open_frames, prefetch
-    from autotrack.localize import localize_sequence
+    from autotrack.io.frames import open_frames
+    from autotrack.localization.scene import load_scene
     from autotrack.params import preset
-    from autotrack.scene import load_scene
+    from autotrack.pipeline import localize_sequence
 
     cv2.setNumThreads(1)
     scene = load_scene(sequence / "scene.json")
@@ -130,9 +131,8 @@ def multi_target_pose(sequence: Path, threads: int) -> dict:
             source.read_bgr(index)
     with open_frames(sequence) as source:
         start = time.perf_counter()
-        frames = prefetch(iter(source)) if threads > 1 else source
         records = list(
-            localize_sequence(frames, scene, boxes, preset("autotrack"), threads=threads)
+            localize_sequence(source, scene, boxes, preset("autotrack"), threads=threads)
         )
         elapsed = time.perf_counter() - start
     valid = sum(bool(r.pose.valid) for r in records)
@@ -143,8 +143,8 @@ _FIRST_FRAME_SCRIPT = """
 import time, sys
 import numpy as np
 from autotrack import AutoTrack, preset
-from autotrack.datasets import load_otb_sequence
-from autotrack.frames import read_image
+from autotrack.evaluation.datasets import load_otb_sequence
+from autotrack.io.frames import read_image
 sequence = load_otb_sequence(sys.argv[1])[0]
 tracker = AutoTrack(preset("autotrack"))
 tracker.init(read_image(sequence.frame_paths[0]), sequence.init_box)
@@ -177,8 +177,8 @@ def guard(boxes_by_sequence: dict[str, np.ndarray]) -> bool:
     mean precision@20 or mean AUC over the twelve sequences moving by more than 0.01 (the spec's
     bound for rounding noise), or a sequence whose boxes differ from its very first frames.
     """
-    from autotrack.datasets import read_boxes
-    from autotrack.evaluation import score_sequence
+    from autotrack.evaluation.metrics import score_sequence
+    from autotrack.io.otb_boxes import read_boxes
 
     print(
         f"\nregression guard (AutoTrack + published table vs {REFERENCE.name}/, {TOLERANCE_PX} px)"

@@ -6,13 +6,13 @@ import cv2
 import numpy as np
 import pytest
 
-from autotrack.area_resample import (
+from autotrack.tracker.area_resample import (
     area_path_is_generic,
     area_paths_are_generic,
     area_resize_crop,
     area_resize_crops,
 )
-from autotrack.sampling import crop_replicate, resize_auto, scale_patches, search_patch
+from autotrack.tracker.sampling import crop_replicate, resize_auto, scale_patches, search_patch
 
 
 def _opencv_sample(image, top, left, size_hw, out_hw):

@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 from autotrack.cli import main
-from autotrack.datasets import read_boxes
+from autotrack.io.otb_boxes import read_boxes
 from tests.sequences import moving_target_sequence
 
 
@@ -40,11 +40,33 @@ def test_track_writes_one_based_boxes_and_prints_scores(sequence_folder, tmp_pat
     np.testing.assert_allclose(boxes[0], truth[0], atol=1.0)
 
 
-def test_track_with_explicit_init_on_a_plain_image_folder(sequence_folder, tmp_path, capsys):
-    truth = np.loadtxt(sequence_folder / "groundtruth_rect.txt", delimiter=",")
-    init = ",".join(f"{v:.1f}" for v in truth[0])
-    assert main(["track", str(sequence_folder / "img"), "--init", init, "--quiet"]) == 0
-    assert "precision" not in capsys.readouterr().out  # no ground truth beside a plain folder
+def _centres(boxes: np.ndarray) -> np.ndarray:
+    return boxes[:, :2] + boxes[:, 2:] / 2
+
+
+def test_track_with_explicit_init_starts_from_that_box(sequence_folder, tmp_path, capsys):
+    """--init (1-based, like the output) is the first output row, and tracking starts there."""
+    truth = read_boxes(sequence_folder / "groundtruth_rect.txt")  # 0-based
+    np.testing.assert_array_equal(truth[0], [76, 100, 40, 40])
+    on_target, on_background = tmp_path / "target.txt", tmp_path / "background.txt"
+    folder = str(sequence_folder / "img")  # a plain image folder: no ground truth beside it
+    assert (
+        main(["track", folder, "--init", "77,101,40,40", "--out", str(on_target), "--quiet"]) == 0
+    )
+    assert "precision" not in capsys.readouterr().out
+    argv = ["track", folder, "--init", "241,41,40,40", "--out", str(on_background), "--quiet"]
+    assert main(argv) == 0
+    assert on_target.read_text().splitlines()[0] == "77,101,40,40"
+    assert on_background.read_text().splitlines()[0] == "241,41,40,40"
+
+    # From the target's box the tracker follows it over its 128 px journey ...
+    followed = read_boxes(on_target)
+    errors = np.linalg.norm(_centres(followed) - _centres(truth), axis=1)
+    assert np.linalg.norm(_centres(truth)[-1] - _centres(truth)[0]) > 120
+    assert errors.max() < 10.0
+    # ... while a box on the static background (0-based centre 260, 60) stays where it was.
+    stayed = read_boxes(on_background)
+    assert np.linalg.norm(_centres(stayed) - [260.0, 60.0], axis=1).max() < 10.0
 
 
 def _error_line(capsys) -> str:

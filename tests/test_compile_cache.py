@@ -43,7 +43,7 @@ def test_unwritable_numba_cache_dir_is_replaced(clean_env, monkeypatch):
 
 
 def test_spectrum_transform_returns_a_new_spectrum_each_call():
-    from autotrack.dcf import SpectrumTransform, to_spectrum
+    from autotrack.tracker.dcf import SpectrumTransform, to_spectrum
 
     transform = SpectrumTransform(3, (12, 10))
     maps = np.random.default_rng(0).random((3, 12, 10)).astype(np.float32)
@@ -62,7 +62,7 @@ def test_second_process_loads_the_cached_kernels(tmp_path):
         "import numpy as np; from autotrack import AutoTrack, preset;"
         "f = np.zeros((64, 96, 3), np.uint8); f[20:40, 30:60] = 200;"
         "t = AutoTrack(preset('autotrack')); t.init(f, (30, 20, 30, 20)); t.update(f);"
-        "from autotrack.fhog import _fhog_into; print(len(_fhog_into.stats.cache_hits))"
+        "from autotrack.tracker.fhog import _fhog_into; print(len(_fhog_into.stats.cache_hits))"
     )
     first = subprocess.run([sys.executable, "-c", script], env=env, capture_output=True, text=True)
     assert first.returncode == 0, first.stderr

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from autotrack import dcf, regularization
+from autotrack.tracker import dcf, regularization
 
 
 def _random_spectra(rng: np.random.Generator, grid=(6, 8), channels=3):
@@ -111,6 +111,57 @@ def test_local_variation_is_zero_for_a_translated_identical_response():
     # floor(2.4) = 2, floor(-2.6) = -3: aligning both peaks undoes the motion exactly.
     np.testing.assert_allclose(variation, 0.0, atol=1e-6)
     assert regularization.global_variation(variation) == pytest.approx(0.0, abs=1e-9)
+
+
+def test_local_variation_matches_hand_computed_values():
+    # 2 x 3 maps. The current peak moved by (1.5, -0.5) cells: floor -> (1, -1), so the aligned
+    # map is aligned[r, c] = current[(r + 1) % 2, (c - 1) % 3]; the previous one did not move.
+    current = np.array([[10.0, 5.0, 4.0], [2.0, 2.0, 2.0]])
+    previous = np.array([[1.0, 2.0, -4.0], [8.0, 5.0, 10.0]])
+    # aligned = [[2, 2, 2], [4, 10, 5]]; Pi = |aligned - previous| / |previous|:
+    #   [[1/1, 0/2, 6/4], [4/8, 5/5, 5/10]] = [[1, 0, 1.5], [0.5, 1, 0.5]],
+    # then centred by a circular shift of floor([2, 3] / 2) = (1, 1).
+    expected = np.array([[0.5, 0.5, 1.0], [1.5, 1.0, 0.0]])
+    variation = regularization.local_variation(current, (1.5, -0.5), previous, (0.0, 0.0))
+    assert variation.dtype == np.float32
+    np.testing.assert_allclose(variation, expected, rtol=1e-6)
+
+
+def test_local_variation_aligns_each_map_by_its_own_floored_peak():
+    rng = np.random.default_rng(5)
+    rows, cols = 7, 8
+    current = rng.uniform(-1.0, 1.0, size=(rows, cols))
+    previous = rng.uniform(0.2, 1.0, size=(rows, cols)) * rng.choice([-1.0, 1.0], (rows, cols))
+    displacement, previous_displacement = (-1.3, 2.7), (0.6, -2.2)
+    variation = regularization.local_variation(
+        current, displacement, previous, previous_displacement
+    )
+    # Element by element, from the index formulas: shift by -floor(d), then centre by
+    # floor(size / 2) -> Pi_centred[r, c] = Pi[r - 3, c - 4].
+    expected = np.empty((rows, cols))
+    for r in range(rows):
+        for c in range(cols):
+            r0, c0 = (r - rows // 2) % rows, (c - cols // 2) % cols
+            now = current[(r0 - 2) % rows, (c0 + 2) % cols]  # floor(-1.3) = -2, floor(2.7) = 2
+            before = previous[r0 % rows, (c0 - 3) % cols]  # floor(0.6) = 0, floor(-2.2) = -3
+            expected[r, c] = abs(now - before) / abs(before)
+    np.testing.assert_allclose(variation, expected, rtol=1e-5)
+
+
+def test_local_variation_of_a_zero_previous_response_is_flagged_not_hidden():
+    previous = np.ones((4, 4))
+    previous[0, 0] = 0.0
+    current = np.ones((4, 4))
+    current[0, 1] = 0.0
+    previous[0, 1] = 0.0  # 0 / 0
+    current[0, 0] = 3.0  # 2 / 0
+    variation = regularization.local_variation(current, (0.0, 0.0), previous, (0.0, 0.0))
+    # Centred by (2, 2): the two bad entries land at (2, 2) and (2, 3); the rest is exact 0.
+    assert variation[2, 2] == np.inf and np.isnan(variation[2, 3])
+    finite = np.isfinite(variation)
+    assert finite.sum() == 14 and np.all(variation[finite] == 0.0)
+    eta = regularization.global_variation(variation)
+    assert eta == float("inf") and regularization.is_aberrant(eta, 0.3)
 
 
 def test_global_variation_uses_the_spectral_norm_and_flags_blow_ups():

@@ -12,7 +12,8 @@ import pytest
 import scipy.io
 
 from autotrack.errors import InputError
-from autotrack.features import (
+from autotrack.params import TrackerParams
+from autotrack.tracker.features import (
     COLOUR_PROTOTYPES,
     COLOUR_TERMS,
     RGB2GRAY_WEIGHTS,
@@ -30,12 +31,8 @@ from autotrack.features import (
     scale_features,
     srgb_to_lab,
 )
-from autotrack.fhog import fhog, fhog_batch
-from autotrack.params import TrackerParams
-
-SHARED = Path(__file__).resolve().parents[1] / ".." / "shared"
-CN_TABLE = SHARED / "data" / "color_names" / "cn_norm_32768x10.npy"
-SEQUENCES = SHARED / "data" / "sequences"
+from autotrack.tracker.fhog import fhog, fhog_batch
+from tests.conftest import COLOUR_TABLE, SEQUENCES
 
 PI32 = np.float32(3.14159265)
 
@@ -349,9 +346,9 @@ def test_colour_table_feature_is_the_cell_mean_of_the_lookup():
 
 @pytest.fixture(scope="module")
 def published_table() -> np.ndarray:
-    if not CN_TABLE.is_file():
-        pytest.skip(f"published Color Names table not found at {CN_TABLE}")
-    return load_colour_table(CN_TABLE)
+    if not COLOUR_TABLE.is_file():
+        pytest.skip(f"published Color Names table not found at {COLOUR_TABLE}")
+    return load_colour_table(COLOUR_TABLE)
 
 
 def test_published_table_loads_and_a_uniform_patch_returns_its_row(published_table):

@@ -9,9 +9,8 @@ import numpy as np
 import pytest
 
 from autotrack.errors import InputError
-from autotrack.frames import ImageSequence, VideoFrames, open_frames
-
-SHARED = Path(__file__).resolve().parents[1] / ".." / "shared" / "data" / "sequences"
+from autotrack.io.frames import ImageSequence, VideoFrames, open_frames
+from tests.conftest import shared_sequence_dir
 
 
 def _write_frames(folder: Path, count: int, size_wh=(32, 24)) -> list[np.ndarray]:
@@ -119,45 +118,8 @@ def test_single_image_file_is_a_one_frame_source(tmp_path):
 
 
 def test_real_benchmark_sequence():
-    folder = SHARED / "OTB" / "Crossing"
-    if not folder.is_dir():
-        pytest.skip("shared data not available")
+    folder = shared_sequence_dir("OTB", "Crossing")
     source = open_frames(folder)
     assert len(source) == 120
     assert source.frame_size == (360, 240)
     assert source.read(119).shape == (240, 360, 3)
-
-
-def test_prefetch_yields_every_frame_in_order_and_forwards_errors():
-    from autotrack.frames import prefetch
-
-    frames = [np.full((4, 4), i, np.uint8) for i in range(7)]
-    assert [int(f[0, 0]) for f in prefetch(iter(frames), depth=2)] == list(range(7))
-
-    def failing():
-        yield frames[0]
-        raise InputError("frame 1: cannot decode")
-
-    reader = prefetch(failing())
-    assert int(next(reader)[0, 0]) == 0
-    with pytest.raises(InputError, match="cannot decode"):
-        next(reader)
-
-
-def test_prefetch_stops_its_reader_when_closed_early():
-    import threading
-
-    from autotrack.frames import prefetch
-
-    produced = []
-
-    def endless():
-        while True:
-            produced.append(len(produced))
-            yield np.zeros((2, 2), np.uint8)
-
-    reader = prefetch(endless(), depth=1)
-    next(reader)
-    reader.close()
-    assert not any(t.name == "frame-prefetch" and t.is_alive() for t in threading.enumerate())
-    assert len(produced) <= 4

@@ -25,8 +25,8 @@ import pytest
 from autotrack.cli import main
 from autotrack.errors import SessionError
 from autotrack.sessions import open_session
+from tests.conftest import REPO
 
-REPO_ROOT = Path(__file__).resolve().parents[1]
 MIN_MESSAGES = 60
 MIN_RECORDING_S = 3.0
 MAX_LOSS_S = 1.5
@@ -36,7 +36,7 @@ import json, math, sys, time
 import numpy as np
 from autotrack.params import TrackerParams
 from autotrack.sessions import SessionRecorder
-from autotrack.tracker import AutoTrack
+from autotrack.tracker.tracker import AutoTrack
 
 path = sys.argv[1]
 rng = np.random.default_rng(3)
@@ -104,7 +104,7 @@ def test_kill_minus_nine_keeps_everything_flushed(
     script = tmp_path / "record_forever.py"
     script.write_text(CHILD)
     session_path = tmp_path / "crash.mcap"
-    env = dict(os.environ, PYTHONPATH=str(REPO_ROOT))
+    env = dict(os.environ, PYTHONPATH=str(REPO))
     stderr_path = tmp_path / "stderr.txt"
     with open(stderr_path, "w") as stderr:
         child = subprocess.Popen(
