@@ -10,7 +10,7 @@ from importlib.metadata import entry_points
 from autotrack.errors import AutoTrackError
 
 # Each module defines `add_parser(subparsers)`; the parser it adds sets `func`.
-_COMMAND_MODULES = ("track", "bench", "localize", "synth", "session")
+_COMMAND_MODULES = ("track", "bench", "sweep", "localize", "synth", "session")
 COMMANDS_ENTRY_POINT_GROUP = "autotrack.commands"
 """Other packages add sub-commands here: an entry point naming their `add_parser` (the web app
 adds `autotrack app` this way, so the library never imports it)."""
