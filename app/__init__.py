@@ -15,6 +15,7 @@ calls), `controller` (the per-tab state and commands; no viser), `worker` (the t
 commands and playback), `display` (the thread that sends frames, plots, maps and the 3-D view),
 `views` (the snapshots passed between them), `canvas` (letterboxing and overlays), `view3d`
 (3-D scene), `plots` (live charts), `paths` (what a browser may open; safe uploads), `exports`
-(downloads), `channel` (the per-tab connection). Tracking, poses and recording are the
+(downloads), `channel` (the per-tab connection), `access` (token, Origin and Host checks),
+`uploads` (uploads streamed to disk within the limits). Tracking, poses and recording are the
 library's `autotrack.pipeline.Pipeline`.
 """

@@ -10,6 +10,8 @@ import argparse
 import os
 import shutil
 import signal
+import socket
+import sys
 import threading
 from dataclasses import replace
 from pathlib import Path
@@ -45,6 +47,14 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
         "--host",
         default="127.0.0.1",
         help="interface to listen on (default 127.0.0.1: this machine only; 0.0.0.0: everyone)",
+    )
+    parser.add_argument(
+        "--no-token",
+        action="store_true",
+        help=(
+            "serve without the access token in the URL (unsafe: any web page you visit, and "
+            "on a non-loopback --host anyone on the network, can then drive the app)"
+        ),
     )
     parser.add_argument("--port", type=int, default=8080, help="port to try first (default 8080)")
     parser.add_argument(
@@ -99,6 +109,23 @@ def startup_roots(sequence: Path | None, scene: Path | None, allow_roots: list[P
     return roots
 
 
+def check_bindable(host: str) -> None:
+    """Fail at once, with a message, when `host` is no address this machine can listen on
+    (viser would retry port after port and then wait forever)."""
+    try:
+        addresses = socket.getaddrinfo(host or None, 0, type=socket.SOCK_STREAM)
+    except (socket.gaierror, UnicodeError) as error:
+        raise InputError(f"--host {host}: not a known address ({error})") from error
+    family, kind, proto, _name, address = addresses[0]
+    try:
+        with socket.socket(family, kind, proto) as probe:
+            probe.bind(address)
+    except OSError as error:
+        raise InputError(
+            f"--host {host}: cannot listen there ({error.strerror or error})"
+        ) from error
+
+
 def rendered_demo() -> Path:
     """The demo rendered into the user's cache folder (installs without the repo's static/).
 
@@ -134,6 +161,7 @@ def run(args: argparse.Namespace) -> int:
     if args.max_targets < 1:
         raise InputError(f"--max-targets must be at least 1, got {args.max_targets}")
     roots = startup_roots(args.sequence, args.scene, args.allow_roots)
+    check_bindable(args.host)
 
     from app.server import StudioServer  # viser loads only when the app starts
 
@@ -148,6 +176,8 @@ def run(args: argparse.Namespace) -> int:
         canvas_fps=args.canvas_fps,
         max_targets=args.max_targets,
     )
+    if args.no_token:
+        config = replace(config, token=None)
     if config.sequence is None and not config.demo_dir.is_dir():
         config = replace(config, demo_dir=rendered_demo())
     studio = StudioServer(config)
@@ -156,6 +186,15 @@ def run(args: argparse.Namespace) -> int:
         print(
             f"listening on {args.host}: other machines can reach this app; "
             "they can open only the allowed folders",
+            flush=True,
+        )
+    if args.no_token:
+        reach = "anyone who can reach the port" if args.host not in LOOPBACK_HOSTS else ""
+        print(
+            "warning: --no-token: any web page open in a browser on this machine"
+            + (f", and {reach}," if reach else "")
+            + " can drive this app",
+            file=sys.stderr,
             flush=True,
         )
     print(f"sessions are recorded in {config.sessions_dir.resolve()}; Ctrl-C stops", flush=True)

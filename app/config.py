@@ -5,6 +5,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from app.access import new_token
 from app.paths import UploadLimits, normalise_roots
 
 DEMO_DIR = Path(__file__).resolve().parents[1] / "static" / "demo"
@@ -38,6 +39,8 @@ class AppConfig:
     canvas_fps: float = 5.0
     """Initial cap on frames per second sent to the 3-D canvas background (software WebGL
     draws only a few per second; the GUI video panel is not capped)."""
+    token: str | None = field(default_factory=new_token)
+    """Secret every request must carry (in the URL, then a cookie); None: no token (warned)."""
     upload_limits: UploadLimits = field(default_factory=UploadLimits)
     """Bounds on uploads."""
 
@@ -45,6 +48,11 @@ class AppConfig:
     def upload_dir(self) -> Path:
         """Folder receiving uploaded videos and unpacked zips."""
         return self.sessions_dir / "uploads"
+
+    @property
+    def incoming_dir(self) -> Path:
+        """Folder receiving uploads while they arrive (outside every folder a tab may open)."""
+        return self.sessions_dir / ".incoming"
 
     def browsable_roots(self) -> tuple[Path, ...]:
         """Every folder a tab may open things from: the allowed roots, the demo, the uploads."""

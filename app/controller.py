@@ -158,8 +158,9 @@ class TabController:
             raise InputError(f"unknown tracker preset {name!r}; choose one of {sorted(PRESETS)}")
         self.preset_name = name
 
-    def open_upload(self, file_name: str, content: bytes) -> None:
-        """Store an uploaded video or zip of images safely, then open it."""
+    def open_upload(self, file_name: str, content: bytes | Path) -> None:
+        """Store an uploaded video or zip of images (bytes or a received file) safely, then
+        open it."""
         config = self.config
         path = store_upload(file_name, content, config.upload_dir, config.upload_limits)
         self.refresh_sequences()

@@ -8,12 +8,15 @@ after checking every name (no absolute paths, no `..`, no links) and the totals.
 
 from __future__ import annotations
 
+import contextlib
 import os
 import re
 import secrets
+import shutil
 import stat
 import time
 import zipfile
+import zlib
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
 from io import BytesIO
@@ -37,6 +40,23 @@ class UploadLimits:
     """Most images a zip may hold."""
     max_extracted_bytes: int = 2 * 1024**3
     """Largest total size of the images unpacked from one zip (bytes)."""
+    max_image_bytes: int = 64 * 1024**2
+    """Largest single image in a zip (bytes)."""
+    max_image_pixels: int = 40_000_000
+    """Most pixels an image in a zip may have (8K is 33 million): checked from its header,
+    before anything decodes it, as one decoded frame takes 3 bytes per pixel."""
+    max_upload_dir_bytes: int = 8 * 1024**3
+    """Quota of the uploads folder (bytes): uploads and unpacked zips together."""
+
+
+def folder_bytes(folder: Path) -> int:
+    """Total size of the files under `folder` (0 when it does not exist)."""
+    total = 0
+    for parent, _dirs, files in os.walk(folder):
+        for name in files:
+            with contextlib.suppress(OSError):
+                total += os.lstat(os.path.join(parent, name)).st_size
+    return total
 
 
 def normalise_roots(roots: Iterable[str | Path]) -> tuple[Path, ...]:
@@ -180,7 +200,7 @@ def _member_problem(info: zipfile.ZipInfo) -> str | None:
     return None
 
 
-def extract_image_zip(content: bytes, destination: Path, limits: UploadLimits) -> Path:
+def extract_image_zip(content: bytes | Path, destination: Path, limits: UploadLimits) -> Path:
     """Unpack the images of a zip into `destination/img/` and return that folder.
 
     Every member is checked before anything is written: absolute names, `..` components and
@@ -190,8 +210,8 @@ def extract_image_zip(content: bytes, destination: Path, limits: UploadLimits) -
     declared and the actually written sizes are both held to `limits`.
     """
     try:
-        archive = zipfile.ZipFile(BytesIO(content))
-    except zipfile.BadZipFile as error:
+        archive = zipfile.ZipFile(content if isinstance(content, Path) else BytesIO(content))
+    except (zipfile.BadZipFile, OSError) as error:
         raise InputError(f"the upload is not a readable zip file ({error})") from error
     with archive:
         images: list[zipfile.ZipInfo] = []
@@ -218,6 +238,18 @@ def extract_image_zip(content: bytes, destination: Path, limits: UploadLimits) -
                 f"the zip unpacks to {declared / 1e6:.0f} MB; the limit is "
                 f"{limits.max_extracted_bytes / 1e6:.0f} MB"
             )
+        biggest = max(images, key=lambda info: info.file_size)
+        if biggest.file_size > limits.max_image_bytes:
+            raise InputError(
+                f"refused the zip: {biggest.filename} is {biggest.file_size / 1e6:.0f} MB; "
+                f"the limit per image is {limits.max_image_bytes / 1e6:.0f} MB"
+            )
+        room = limits.max_upload_dir_bytes - folder_bytes(destination.parent)
+        if declared > room:
+            raise InputError(
+                "the uploads folder would exceed its quota with this zip; "
+                "ask the server's owner to clear it"
+            )
         images.sort(key=lambda info: info.filename)
         image_folder = destination / "img"
         image_folder.mkdir(parents=True, exist_ok=False)
@@ -225,39 +257,78 @@ def extract_image_zip(content: bytes, destination: Path, limits: UploadLimits) -
         for index, info in enumerate(images, start=1):
             suffix = PurePosixPath(info.filename).suffix.lower()
             target = image_folder / f"{index:06d}{suffix}"
-            with archive.open(info) as source, open(target, "xb") as sink:
-                while chunk := source.read(1 << 20):
-                    written += len(chunk)
-                    if written > limits.max_extracted_bytes:
-                        raise InputError("the zip unpacks to more than its declared size; refused")
-                    sink.write(chunk)
+            try:
+                with archive.open(info) as source, open(target, "xb") as sink:
+                    chunk = source.read(1 << 20)
+                    _check_pixels(info.filename, chunk, limits)
+                    while chunk:
+                        written += len(chunk)
+                        if written > limits.max_extracted_bytes:
+                            raise InputError("the zip unpacks to more than it declares; refused")
+                        sink.write(chunk)
+                        chunk = source.read(1 << 20)
+            except (zipfile.BadZipFile, zlib.error, EOFError) as error:
+                raise InputError(f"the zip is damaged at {info.filename} ({error})") from error
     return image_folder
 
 
-def store_upload(file_name: str, content: bytes, upload_root: Path, limits: UploadLimits) -> Path:
-    """Write an uploaded video or zip of images under `upload_root`; return what to open.
+def _check_pixels(name: str, head: bytes, limits: UploadLimits) -> None:
+    """Refuse an image whose header (the first bytes of the file) is unreadable or declares
+    more pixels than the limit, before anything decodes it."""
+    from PIL import Image, UnidentifiedImageError
 
-    A video is written as-is under a sanitised name; a zip is unpacked by `extract_image_zip`.
-    """
-    if len(content) == 0:
-        raise InputError("the uploaded file is empty")
-    if len(content) > limits.max_upload_bytes:
+    try:
+        with Image.open(BytesIO(head)) as image:
+            width, height = image.size
+    except Image.DecompressionBombError as error:  # PIL's own, far higher, limit
         raise InputError(
-            f"the upload is {len(content) / 1e6:.0f} MB; the limit is "
+            f"refused the zip: {name} has more than "
+            f"{limits.max_image_pixels / 1e6:.0f} million pixels"
+        ) from error
+    except (UnidentifiedImageError, OSError, ValueError, SyntaxError) as error:
+        raise InputError(f"refused the zip: {name} is not a readable image") from error
+    if width * height > limits.max_image_pixels:
+        raise InputError(
+            f"refused the zip: {name} is {width}x{height} pixels; the limit is "
+            f"{limits.max_image_pixels / 1e6:.0f} million pixels per image"
+        )
+
+
+def store_upload(
+    file_name: str, content: bytes | Path, upload_root: Path, limits: UploadLimits
+) -> Path:
+    """Put an uploaded video or zip of images under `upload_root`; return what to open.
+
+    `content` is the file's bytes or a received file (moved, not copied). A video is kept as
+    is under a sanitised name; a zip is unpacked by `extract_image_zip`. A refused upload
+    leaves nothing under `upload_root`.
+    """
+    size = content.stat().st_size if isinstance(content, Path) else len(content)
+    if size == 0:
+        raise InputError("the uploaded file is empty")
+    if size > limits.max_upload_bytes:
+        raise InputError(
+            f"the upload is {size / 1e6:.0f} MB; the limit is "
             f"{limits.max_upload_bytes / 1e6:.0f} MB"
         )
     name = safe_file_name(file_name)
     suffix = Path(name).suffix.lower()
-    if suffix == ".zip":
+    if suffix == ".zip" or suffix in VIDEO_SUFFIXES:
         folder = new_upload_folder(upload_root, Path(name).stem)
-        extract_image_zip(content, folder, limits)
-        return folder
-    if suffix in VIDEO_SUFFIXES:
-        folder = new_upload_folder(upload_root, Path(name).stem)
-        target = folder / name
-        with open(target, "xb") as sink:
-            sink.write(content)
-        return target
+        try:
+            if suffix == ".zip":
+                extract_image_zip(content, folder, limits)
+                return folder
+            target = folder / name
+            if isinstance(content, Path):
+                shutil.move(content, target)
+            else:
+                with open(target, "xb") as sink:
+                    sink.write(content)
+            return target
+        except BaseException:
+            shutil.rmtree(folder, ignore_errors=True)
+            raise
     raise InputError(
         f"cannot use {file_name!r}: upload a video ({', '.join(sorted(VIDEO_SUFFIXES))}) "
         "or a .zip of images"

@@ -12,10 +12,12 @@ import threading
 
 import viser
 
+from app.access import AccessGuard, guarded_handshakes
 from app.channel import ClientChannel, ViserClientChannel
 from app.config import AppConfig
 from app.recordings import RecordingRegistry
 from app.tab import Tab
+from app.uploads import UploadReceiver
 from autotrack.tracker.tracker import warm_up
 
 
@@ -27,12 +29,19 @@ class StudioServer:
         config.sessions_dir.mkdir(parents=True, exist_ok=True)
         self.roots = config.browsable_roots()
         self.recordings = RecordingRegistry()
+        self.uploads = UploadReceiver(config.incoming_dir, config.upload_dir, config.upload_limits)
         self._lock = threading.Lock()
         self.tabs: dict[int, Tab] = {}
         """Open tabs by id (guarded by a lock: tabs connect and leave on viser's threads)."""
-        self.viser = viser.ViserServer(
-            host=config.host, port=config.port, label="AutoTrack Studio", verbose=False
-        )
+        self.access = AccessGuard(config.token, config.host)
+        with guarded_handshakes(self.access):
+            self.viser = viser.ViserServer(
+                host=config.host, port=config.port, label="AutoTrack Studio", verbose=False
+            )
+        if not self.access.installed:
+            self.viser.stop()
+            raise RuntimeError("the access check could not be installed in viser's server")
+        self.access.port = self.viser.get_port()
         self.viser.gui.configure_theme(control_width="large")
         # Docked, the panel does not cover the canvas, so the whole frame stays drawable.
         self.viser.gui.main_panel.dock_right()
@@ -49,12 +58,13 @@ class StudioServer:
 
     @property
     def url(self) -> str:
-        """Address to open in a browser."""
+        """Address to open in a browser (with the access token, unless started without)."""
         host = self.config.host
-        shown = "127.0.0.1" if host in ("0.0.0.0", "") else host
+        shown = "127.0.0.1" if host in ("0.0.0.0", "::", "") else host
         if ":" in shown:
             shown = f"[{shown}]"
-        return f"http://{shown}:{self.port}"
+        query = "" if self.config.token is None else f"/?token={self.config.token}"
+        return f"http://{shown}:{self.port}{query}"
 
     def _connect(self, client: viser.ClientHandle) -> None:
         self.open_tab(ViserClientChannel(client), client.gui, client.scene, tab_id=client.client_id)
@@ -70,6 +80,9 @@ class StudioServer:
         """Build a tab on the given GUI and scene handles (a client's, or the server's in
         tests) and open the start-up sequence in it."""
         tab = Tab(self.config, self.roots, self.recordings, channel, gui, scene, tab_id=tab_id)
+        self.uploads.attach(
+            gui, tab.panels.sequence.upload, tab_id, tab.receive_upload_file, tab.refuse_upload
+        )
         with self._lock:
             self.tabs[tab_id] = tab
         tab.open_initial()
@@ -79,6 +92,7 @@ class StudioServer:
         """Close a tab (its browser went away), finishing its recording."""
         with self._lock:
             tab = self.tabs.pop(tab_id, None)
+        self.uploads.forget_tab(tab_id)
         if tab is not None:
             tab.close()
 

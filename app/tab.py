@@ -137,6 +137,22 @@ class Tab:
         """An uploaded video or zip of images: stored safely, then opened (queued)."""
         self.worker.submit(self.controller.open_upload, file_name, content)
 
+    def receive_upload_file(self, file_name: str, path: Path) -> None:
+        """An upload received on disk: stored (moved or unpacked), then opened (queued); the
+        received file is deleted whatever happens."""
+
+        def store_and_open() -> None:
+            try:
+                self.controller.open_upload(file_name, path)
+            finally:
+                path.unlink(missing_ok=True)
+
+        self.worker.submit(store_and_open)
+
+    def refuse_upload(self, message: str) -> None:
+        """An upload refused while it arrived: say why."""
+        self.channel.notify("AutoTrack Studio", message, error=True)
+
     def rect_selected(self, event: viser.SceneRectSelectEvent) -> None:
         """A shift-drag on the canvas: a box at the current frame (queued)."""
         if self.panels.display.canvas.value != CANVAS_FRAME:

@@ -8,7 +8,6 @@ import cv2
 import numpy as np
 import pytest
 
-from autotrack.tracker import sampling
 from autotrack.tracker.sampling import crop_replicate, resize_auto, scale_patches, search_patch
 
 
@@ -127,22 +126,18 @@ def test_search_patch_is_the_clamped_crop_resampled():
     np.testing.assert_allclose(patch, bilinear_resize(crop, (10, 10)), atol=1e-3)
 
 
-def test_scale_patches_crop_floor_of_base_size_times_factor(monkeypatch):
+def test_scale_patches_crop_floor_of_base_size_times_factor():
     rng = np.random.default_rng(5)
     image = rng.integers(0, 256, size=(60, 80, 3), dtype=np.uint8)
-    crops = []
-
-    def recording_crop(image, position, size_hw):
-        crops.append(tuple(int(v) for v in size_hw))
-        return crop_replicate(image, position, size_hw)
-
-    monkeypatch.setattr(sampling, "crop_replicate", recording_crop)
     factors = np.array([1.03**2, 1.0, 1.03**-2, 0.05])
     samples = scale_patches(image, (30.0, 40.0), np.array([20.5, 31.0]), factors, (8, 6))
-    # floor(20.5 * 1.0609) = floor(21.75) = 21 (rounding would give 22), floor(31 * 1.0609) = 32;
-    # 0.05 gives 1 x 1 pixels, raised to the release's minimum of 2.
-    assert crops == [(21, 32), (20, 31), (19, 29), (2, 2)]
     assert samples.shape == (4, 8, 6, 3) and samples.dtype == np.uint8
+    # floor(20.5 * 1.0609) = floor(21.75) = 21 (rounding would give 22), floor(31 * 1.0609) = 32;
+    # 0.05 gives 1 x 1 pixels, raised to the release's minimum of 2. Each sample is that crop
+    # resized to the model size, bit for bit (a crop one pixel larger gives other samples).
+    for sample, crop_size in zip(samples, [(21, 32), (20, 31), (19, 29), (2, 2)], strict=True):
+        crop = crop_replicate(image, (30.0, 40.0), crop_size)
+        np.testing.assert_array_equal(sample, resize_auto(crop, (8, 6)))
 
 
 def test_scale_patch_at_the_model_size_is_the_plain_crop():

@@ -10,7 +10,7 @@ from importlib.metadata import entry_points
 from autotrack.errors import AutoTrackError
 
 # Each module defines `add_parser(subparsers)`; the parser it adds sets `func`.
-_COMMAND_MODULES = ("track", "bench", "localize", "synth", "session")
+_COMMAND_MODULES = ("track", "bench", "sweep", "localize", "synth", "session")
 COMMANDS_ENTRY_POINT_GROUP = "autotrack.commands"
 """Other packages add sub-commands here: an entry point naming their `add_parser` (the web app
 adds `autotrack app` this way, so the library never imports it)."""
@@ -35,11 +35,28 @@ def main(argv: list[str] | None = None) -> int:
     try:
         return int(args.func(args) or 0)
     except AutoTrackError as error:
-        print(f"autotrack: error: {error}", file=sys.stderr)
+        print(f"autotrack: error: {_one_line(str(error))}", file=sys.stderr)
+        return 2
+    except OSError as error:  # a file that cannot be read or written, a full disk
+        where = f"{error.filename}: " if error.filename else ""
+        print(f"autotrack: error: {where}{error.strerror or error}", file=sys.stderr)
+        return 2
+    except UnicodeDecodeError as error:
+        print(
+            f"autotrack: error: an input file is not UTF-8 text ({error.reason})", file=sys.stderr
+        )
+        return 2
+    except RecursionError:
+        print("autotrack: error: an input file is nested too deeply", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
         print("autotrack: interrupted", file=sys.stderr)
         return 130
+
+
+def _one_line(text: str) -> str:
+    """`text` with its line breaks and NUL characters shown escaped."""
+    return text.replace("\x00", "\\x00").replace("\r", "\\r").replace("\n", "\\n")
 
 
 if __name__ == "__main__":

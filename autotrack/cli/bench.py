@@ -58,12 +58,20 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
         metavar="PATH",
         help="published Color Names table (32768 x 10, .npy or .mat) for the AutoTrack variants",
     )
+    parser.add_argument("--force", action="store_true", help="replace an existing --json file")
+    parser.add_argument(
+        "--scheduler",
+        default=None,
+        metavar="tcp://HOST:PORT",
+        help="run on this Dask scheduler's workers (they need the data at the same path)",
+    )
     parser.add_argument("--no-progress", action="store_true", help="hide the progress bar")
     parser.set_defaults(func=run)
 
 
 def run(args: argparse.Namespace) -> int:
     """Run the benchmark described by the parsed arguments."""
+    from autotrack.cli.checks import check_output_file
     from autotrack.errors import InputError
     from autotrack.evaluation.benchmark import (
         format_table,
@@ -74,19 +82,23 @@ def run(args: argparse.Namespace) -> int:
         write_run_plots,
     )
     from autotrack.evaluation.datasets import load_sequences
+    from autotrack.evaluation.distributed import cluster_executor_for
 
+    check_output_file(args.json, "--json", force=args.force)
     trackers = validate_tracker_names(args.trackers.split(","))
     if args.jobs < 1:
         raise InputError(f"--jobs must be at least 1, got {args.jobs}")
     sequences = load_sequences(args.root)
-    run_result = run_benchmark(
-        sequences,
-        trackers,
-        args.out,
-        jobs=args.jobs,
-        colour_table=args.colour_table,
-        progress=not args.no_progress,
-    )
+    with cluster_executor_for(args) as executor:
+        run_result = run_benchmark(
+            sequences,
+            trackers,
+            args.out,
+            jobs=args.jobs,
+            colour_table=args.colour_table,
+            progress=not args.no_progress,
+            executor=executor,
+        )
     summaries = summarize_run(run_result)
     print(
         f"{len(sequences)} sequences, {sum(len(s) for s in sequences)} frames; "

@@ -13,9 +13,12 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 from tqdm import tqdm
 
+from autotrack.cli.checks import check_output_file, finite
+from autotrack.cli.live import add_live_arguments, check_source, run_localize_live
 from autotrack.errors import InputError
 from autotrack.io.boxes_json import read_boxes_json
 from autotrack.io.csv_table import write_csv
+from autotrack.io.live import source_argument
 from autotrack.localization.scene import Scene, load_scene, scene_warnings
 from autotrack.params import PRESETS, preset
 
@@ -38,7 +41,12 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
             "See docs/localization.md."
         ),
     )
-    parser.add_argument("sequence", type=Path, help="folder of images, video, or sequence folder")
+    parser.add_argument(
+        "sequence",
+        type=source_argument,
+        help="folder of images, video, or sequence folder; with --realtime a camera index, "
+        "stream URL or video",
+    )
     parser.add_argument(
         "--scene",
         type=Path,
@@ -72,8 +80,8 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
         "--threads",
         type=int,
         default=2,
-        help="track the landmarks on this many threads (default 2: 28.8 fps instead of 22.4 "
-        "for four targets at 1280x720 on a 2-core machine)",
+        help="track the landmarks on this many threads "
+        "(default 2; docs/benchmarks.md has the frame rates for 1 and 2 threads)",
     )
     parser.add_argument(
         "--max-rms",
@@ -90,15 +98,19 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
         help="record the run to this new MCAP session file (never overwritten; see "
         "`autotrack session`)",
     )
+    parser.add_argument(
+        "--force", action="store_true", help="replace existing --out and --tracks files"
+    )
     parser.add_argument("--quiet", action="store_true", help="no progress bar")
+    add_live_arguments(parser)
     parser.set_defaults(func=run_localize)
 
 
-def _default_file(given: Path | None, sequence: Path, name: str, option: str) -> Path:
+def _default_file(given: Path | None, sequence: Path | str, name: str, option: str) -> Path:
     if given is not None:
         return given
-    candidate = sequence / name
-    if sequence.is_dir() and candidate.is_file():
+    candidate = Path(sequence) / name
+    if Path(sequence).is_dir() and candidate.is_file():
         return candidate
     raise InputError(f"give {option} (no {name} in {sequence})")
 
@@ -109,6 +121,13 @@ def run_localize(args: argparse.Namespace) -> int:
     from autotrack.localization.localizer import LocalizerParams
     from autotrack.pipeline import Recording, localize_sequence
 
+    check_output_file(args.out, "--out", force=args.force)
+    check_output_file(args.tracks, "--tracks", force=args.force)
+    if args.session is not None and (args.session.exists() or args.session.is_symlink()):
+        raise InputError(f"--session {args.session} exists; session files are never replaced")
+    check_output_file(args.session, "--session", force=False)
+    finite(args.fps, "--fps", low=0)
+    finite(args.max_rms, "--max-rms", low=0)
     scene_path = _default_file(args.scene, args.sequence, "scene.json", "--scene")
     scene = load_scene(scene_path)
     for warning in scene_warnings(scene):
@@ -122,6 +141,17 @@ def run_localize(args: argparse.Namespace) -> int:
             raise InputError("--max-rms must be positive")
         localizer_params = replace(localizer_params, max_rms_error_px=args.max_rms)
     gt = None if args.gt is None else read_tum(args.gt)
+    check_source(args)
+    if args.realtime:
+        return run_localize_live(
+            args,
+            scene=scene,
+            scene_path=scene_path,
+            init=init,
+            tracker_params=preset(args.preset),
+            localizer_params=localizer_params,
+            gt=gt,
+        )
     frames = open_frames(args.sequence)
     fps = args.fps or frames.fps or DEFAULT_FPS
     if fps <= 0:
@@ -148,6 +178,12 @@ def run_localize(args: argparse.Namespace) -> int:
     timestamps = np.arange(len(records)) / fps
     report = summarise(records, timestamps, scene, args.out, args.tracks, gt, frames.name)
     print(report)
+    if not any(record.pose.valid for record in records):
+        print(
+            "autotrack: warning: no frame got a valid pose: check the scene's intrinsics and "
+            "landmarks, the boxes and --max-rms",
+            file=sys.stderr,
+        )
     if args.session is not None:
         print(f"session recorded to {args.session}")
     return 0

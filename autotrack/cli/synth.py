@@ -43,14 +43,27 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
             "(60 frames, 960x540, JPEG quality 60)"
         ),
     )
+    parser.add_argument(
+        "--force", action="store_true", help="write into OUT_DIR even if it is not empty"
+    )
     parser.add_argument("--quiet", action="store_true", help="no progress bar")
     parser.set_defaults(func=run_synth)
 
 
 def run_synth(args: argparse.Namespace) -> int:
+    from autotrack.cli.checks import check_output_folder
     from autotrack.synthetic.testbed import generate_demo, generate_test_bed, sequence_specs
     from autotrack.synthetic.trajectories import RenderSettings
 
+    if args.out_dir.exists() and not args.out_dir.is_dir():
+        raise InputError(f"{args.out_dir} is a file, not a folder")
+    if args.out_dir.is_dir() and any(args.out_dir.iterdir()) and not args.force:
+        raise InputError(f"{args.out_dir} is not empty; pass --force to write into it")
+    check_output_folder(args.out_dir, "OUT_DIR")
+    if not 0 <= args.seed < 2**32:
+        raise InputError(f"--seed must be 0..{2**32 - 1}, got {args.seed}")
+    if args.sequences < 1 or (args.frames is not None and args.frames < 2):
+        raise InputError("--sequences must be at least 1 and --frames at least 2")
     if args.width < 64 or args.width % 16:
         raise InputError("--width must be a multiple of 16, at least 64 (16:9 images)")
     if not 1 <= args.jpeg_quality <= 100:

@@ -9,10 +9,13 @@ from pathlib import Path
 import numpy as np
 from tqdm import tqdm
 
+from autotrack.cli.checks import check_output_file
+from autotrack.cli.live import add_live_arguments, check_source, run_track_live
 from autotrack.errors import BoxError, InputError
 from autotrack.evaluation.datasets import GROUND_TRUTH_FILE
 from autotrack.evaluation.metrics import score_sequence
 from autotrack.io.frames import open_frames
+from autotrack.io.live import source_argument
 from autotrack.io.otb_boxes import read_boxes, write_boxes
 from autotrack.params import PRESETS, preset
 
@@ -39,7 +42,12 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
             "benchmarks' 1-based pixel convention, for --init and for the output alike."
         ),
     )
-    parser.add_argument("sequence", type=Path, help="folder of images, video, or sequence folder")
+    parser.add_argument(
+        "sequence",
+        type=source_argument,
+        help="folder of images, video, or sequence folder; with --realtime a camera index, "
+        "stream URL or video",
+    )
     parser.add_argument(
         "--init",
         type=str,
@@ -56,7 +64,12 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
         help="published Color Names table (.npy/.mat) instead of the built-in colour feature",
     )
     parser.add_argument("--out", type=Path, default=None, help="write boxes here (x,y,w,h rows)")
+    parser.add_argument("--force", action="store_true", help="replace an existing --out file")
     parser.add_argument("--quiet", action="store_true", help="no progress bar")
+    add_live_arguments(parser)
+    parser.add_argument(
+        "--fps", type=float, default=None, help="with --realtime: play a video at this rate"
+    )
     parser.set_defaults(func=run)
 
 
@@ -68,8 +81,13 @@ def _ground_truth(sequence: Path) -> np.ndarray | None:
 def run(args: argparse.Namespace) -> int:
     from autotrack.pipeline import Pipeline
 
+    check_output_file(args.out, "--out", force=args.force)
     if args.colour_table is not None and not args.colour_table.is_file():
         raise InputError(f"Color Names table not found: {args.colour_table}")
+    check_source(args)
+    if args.realtime:
+        init_box = None if args.init is None else np.array(parse_box(args.init)) - [1, 1, 0, 0]
+        return run_track_live(args, preset(args.preset, args.colour_table), init_box)
     frames = open_frames(args.sequence)
     ground_truth = _ground_truth(args.sequence)
     if args.init is not None:

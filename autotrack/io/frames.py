@@ -96,6 +96,11 @@ class FrameSource(ABC):
         height, width = self.read_bgr(0).shape[:2]
         return (width, height)
 
+    def previous_index(self, index: int) -> int:
+        """The frame tracked before frame `index`: `index - 1` (a live source skips the frames
+        it dropped)."""
+        return index - 1
+
     def __iter__(self) -> Iterator[np.ndarray]:
         for index in range(len(self)):
             yield self.read(index)

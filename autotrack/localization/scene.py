@@ -119,6 +119,27 @@ def _require_keys(obj: Any, required: tuple[str, ...], optional: tuple[str, ...]
         raise SceneError(f"{where} has unknown field(s) {', '.join(unknown)} (allowed: {allowed})")
 
 
+MAX_IMAGE_SIDE = 100_000
+"""Largest image width or height a scene may declare (pixels)."""
+MAX_DISTORTION = 1e4
+"""Largest magnitude of a distortion coefficient (real lenses stay far below)."""
+
+
+def _check_plausible(values: dict[str, float], distortion: tuple[float, ...]) -> None:
+    """Refuse intrinsics no camera has (they would give no valid pose, silently): focal
+    lengths outside 1 px..1000x the image size, a principal point far off the image, huge
+    distortion coefficients."""
+    side = max(values["width"], values["height"])
+    for key in ("fx", "fy"):
+        if not 1.0 <= values[key] <= 1000.0 * side:
+            raise SceneError(f"camera.{key} = {values[key]:g} px is implausible for the image size")
+    for key, size in (("cx", values["width"]), ("cy", values["height"])):
+        if not -size <= values[key] <= 2.0 * size:
+            raise SceneError(f"camera.{key} = {values[key]:g} px lies far outside the image")
+    if any(abs(k) > MAX_DISTORTION for k in distortion):
+        raise SceneError(f"camera.distortion has a coefficient above {MAX_DISTORTION:g}")
+
+
 def camera_from_dict(data: Any) -> CameraIntrinsics:
     """Parse and check the `camera` object of a scene file."""
     _require_keys(data, _CAMERA_FIELDS, ("distortion",), "camera")
@@ -137,8 +158,11 @@ def camera_from_dict(data: Any) -> CameraIntrinsics:
     if values["fx"] <= 0 or values["fy"] <= 0:
         raise SceneError("camera.fx and camera.fy must be positive (pixels)")
     for key in ("width", "height"):
-        if values[key] <= 0 or values[key] != int(values[key]):
-            raise SceneError(f"camera.{key} must be a positive whole number of pixels")
+        if not 0 < values[key] <= MAX_IMAGE_SIDE or values[key] != int(values[key]):
+            raise SceneError(
+                f"camera.{key} must be a positive whole number of pixels, at most {MAX_IMAGE_SIDE}"
+            )
+    _check_plausible(values, distortion)
     return CameraIntrinsics(
         fx=values["fx"],
         fy=values["fy"],

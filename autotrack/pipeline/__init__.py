@@ -1,6 +1,6 @@
 """One pipeline for frames -> targets -> camera pose -> session recording (`Pipeline`), used by
 the command line, the app and the benchmark scripts; `localize_sequence` runs it over a whole
-sequence."""
+sequence, `live.run_live` over live input."""
 
 from autotrack.pipeline.localize import localize_sequence
 from autotrack.pipeline.pipeline import Pipeline

@@ -78,14 +78,15 @@ class TrackerGroups:
         return {k: _renumbered(results[k], frame_index) for k in boxes}
 
     def advance(
-        self, frame_index: int, frame_of: Callable[[int], np.ndarray]
+        self, frame_index: int, previous: int, frame_of: Callable[[int], np.ndarray]
     ) -> tuple[dict[str, TrackResult], float]:
-        """Track every group whose head is the previous frame onto `frame_index`.
+        """Track every group whose head is the previous frame (`previous`, usually
+        `frame_index - 1`) onto `frame_index`.
 
         `frame_of(index)` gives the frame (read only when a group is due). Returns the results
         and the tracking time in seconds (NaN when no group was due).
         """
-        due = [group for group in self._groups if group.head == frame_index - 1]
+        due = [group for group in self._groups if group.head == previous]
         if not due:
             return {}, float("nan")
         frame = frame_of(frame_index)

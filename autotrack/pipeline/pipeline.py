@@ -28,7 +28,13 @@ from autotrack.localization.scene import Scene
 from autotrack.params import TrackerParams
 from autotrack.pipeline.groups import TrackerGroups
 from autotrack.pipeline.recording import Recording, open_recorder
-from autotrack.pipeline.targets import SIGNAL_NAMES, FrameOutcome, TrackedTarget, free_numbers
+from autotrack.pipeline.targets import (
+    FrameOutcome,
+    TrackedTarget,
+    free_numbers,
+    grown,
+    number_of,
+)
 from autotrack.result import PoseEstimate, TrackResult
 from autotrack.sessions import Session, SessionRecorder
 from autotrack.tracker.tracker import validate_box
@@ -220,11 +226,8 @@ class Pipeline:
         results = self._timed_start(frame_index, boxes)
         self._embed_frame(frame_index)
         for number, target_id, (_, landmark) in zip(numbers, boxes, entries, strict=True):
-            self.targets[target_id] = TrackedTarget(
-                id=target_id,
-                number=number,
-                landmark_id=landmark,
-                signals={name: np.full(self.frame_count, np.nan) for name in SIGNAL_NAMES},
+            self.targets[target_id] = TrackedTarget.new(
+                target_id, number, landmark, self.frame_count
             )
             self._store(self.targets[target_id], results[target_id])
         self._forget_poses_from(frame_index)
@@ -316,16 +319,27 @@ class Pipeline:
 
     def advance(self, frame_index: int) -> None:
         """Track every target whose tracker is at the previous frame onto `frame_index`, then
-        estimate the pose there if it is not known yet."""
+        estimate the pose there if it is not known yet. A growing (live) source's new frames
+        are taken in first; its previous frame is the last one it did not drop."""
+        if frame_index >= self.frame_count:
+            self._grow()
         if not 0 < frame_index < self.frame_count:
             return
-        results, seconds = self._groups.advance(frame_index, self.frame)
+        previous = self.frames.previous_index(frame_index)
+        results, seconds = self._groups.advance(frame_index, previous, self.frame)
         if results:
             self.frame_seconds[frame_index] = seconds
             self._embed_frame(frame_index)
             for target_id, result in results.items():
                 self._store(self.targets[target_id], result)
         self._estimate_pose(frame_index)
+
+    def _grow(self) -> None:
+        """Take in the frames a growing (live) source delivered since the last call."""
+        self.frame_count = len(self.frames)
+        self.frame_seconds = grown(self.frame_seconds, self.frame_count)
+        for target in self.targets.values():
+            target.grow(self.frame_count)
 
     def track_to(self, frame_index: int, should_stop: Callable[[], bool] | None = None) -> None:
         """Track forward until every target has a result at `frame_index` (or `should_stop`)."""
@@ -419,13 +433,8 @@ class Pipeline:
             landmark = recorded.landmark_id
             if self.scene is None or landmark not in self.scene.landmark_ids:
                 landmark = None
-            number = _number_of(target_id, position + 1)
-            target = TrackedTarget(
-                id=target_id,
-                number=number,
-                landmark_id=landmark,
-                signals={name: np.full(self.frame_count, np.nan) for name in SIGNAL_NAMES},
-            )
+            number = number_of(target_id, position + 1)
+            target = TrackedTarget.new(target_id, number, landmark, self.frame_count)
             self.targets[target_id] = target
             for frame_index, result in sorted(recorded.results.items()):
                 if frame_index <= recorded.last_box[0]:
@@ -474,7 +483,7 @@ class Pipeline:
             aberrant[target.landmark_id] = bool(result.aberrant)
         if not points:
             return
-        if frame_index != self._last_pose_frame + 1:
+        if self._last_pose_frame != self.frames.previous_index(frame_index):
             self._localizer.reset()
         pose = self._localizer.estimate(frame_index, points, confidences, aberrant)
         self._last_pose_frame = frame_index
@@ -489,9 +498,3 @@ class Pipeline:
             pose = self.poses[index]
             if pose.valid:
                 yield index, np.asarray(pose.position, dtype=np.float64)
-
-
-def _number_of(target_id: str, fallback: int) -> int:
-    """The number in a pipeline's target id "T<number>" (`fallback` for other ids)."""
-    digits = target_id[1:]
-    return int(digits) if target_id.startswith("T") and digits.isdigit() else fallback

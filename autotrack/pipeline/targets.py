@@ -41,10 +41,23 @@ class TrackedTarget:
     signals: dict[str, np.ndarray] = field(default_factory=dict)
     """Name in SIGNAL_NAMES -> float64 array over all frames, NaN where nothing is known."""
 
+    @classmethod
+    def new(
+        cls, target_id: str, number: int, landmark_id: str | None, frames: int
+    ) -> TrackedTarget:
+        """A target with no results yet and NaN signals over `frames` frames."""
+        signals = {name: np.full(frames, np.nan) for name in SIGNAL_NAMES}
+        return cls(id=target_id, number=number, landmark_id=landmark_id, signals=signals)
+
     @property
     def last_frame(self) -> int:
         """Last frame with a result (-1 before the box is drawn)."""
         return max(self.results, default=-1)
+
+    def grow(self, frame_count: int) -> None:
+        """Extend the signal arrays to `frame_count` frames (NaN for the new ones)."""
+        for name, values in self.signals.items():
+            self.signals[name] = grown(values, frame_count)
 
 
 @dataclass(frozen=True)
@@ -72,3 +85,14 @@ class FrameOutcome:
     def image_points(self) -> dict[str, tuple[float, float]]:
         """Landmark id -> box centre (the point given to the pose solver)."""
         return {landmark: result.center for landmark, result in self.landmark_tracks.items()}
+
+
+def number_of(target_id: str, fallback: int) -> int:
+    """The number in a pipeline's target id "T<number>" (`fallback` for other ids)."""
+    digits = target_id[1:]
+    return int(digits) if target_id.startswith("T") and digits.isdigit() else fallback
+
+
+def grown(values: np.ndarray, count: int) -> np.ndarray:
+    """`values` extended with NaN to `count` entries."""
+    return np.append(values, np.full(count - len(values), np.nan))

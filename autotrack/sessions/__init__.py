@@ -2,7 +2,8 @@
 
 `schemas` (the channels: published JSON schemas, encodings, topics), `messages` (what each
 message holds), `recorder` (writing), `reader` (reading, also a file cut short), `session` (what
-is read back) and `exports` (OTB tracks, CSV, TUM poses).
+is read back) and `exports` (OTB tracks, CSV, TUM poses, MOT Challenge, CVAT for video 1.1 and
+the evo command).
 """
 
 from autotrack.sessions.exports import write_otb_tracks, write_tracks_csv, write_tum_poses

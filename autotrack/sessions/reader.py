@@ -14,10 +14,9 @@ from pathlib import Path
 from typing import Any, BinaryIO
 
 import numpy as np
-import zstandard
-from mcap.exceptions import EndOfFile, McapError
-from mcap.records import Attachment, Channel, DataEnd, Message, Metadata, Schema
-from mcap.stream_reader import CRCValidationError, StreamReader
+from mcap.exceptions import EndOfFile
+from mcap.records import Attachment, Channel, Chunk, DataEnd, Message, Metadata, Schema
+from mcap.stream_reader import StreamReader
 
 import autotrack
 from autotrack.errors import SessionError
@@ -29,6 +28,7 @@ from autotrack.sessions.encoding import (
     dequantise_map,
     none_to_nan,
 )
+from autotrack.sessions.limits import DECODE_ERRORS, checked_frame_index, chunk_records
 from autotrack.sessions.schemas import TargetStream, TargetTopic, Topics
 from autotrack.sessions.session import PoseTrack, Session, SessionEvent
 
@@ -142,7 +142,9 @@ class _SessionBuilder:
         if target is not None:
             self._add_target_message(target, message)
         elif topic == Topics.POSE_QUALITY.name:
-            self.pose_quality[message.log_time] = json.loads(message.data)
+            quality = json.loads(message.data)
+            checked_frame_index(quality["frame_index"])
+            self.pose_quality[message.log_time] = quality
         elif topic == Topics.POSE.name:
             self.pose_values[message.log_time] = json.loads(message.data)["pose"]
         elif topic == Topics.EVENTS.name:
@@ -153,6 +155,8 @@ class _SessionBuilder:
             self.image_count += 1
 
     def _add_target_message(self, target: TargetTopic, message: Message) -> None:
+        if not target.target_id.isprintable():
+            raise SessionError(f"target id {target.target_id!r} holds control characters")
         if target.stream is TargetStream.SIGNALS:
             self._add_signals(target.target_id, json.loads(message.data))
         elif target.stream is not TargetStream.BOX and self.load_maps:
@@ -179,7 +183,7 @@ class _SessionBuilder:
         if target_id not in self.target_rows:
             self.target_rows[target_id] = {}
             self.target_order.append(target_id)
-        frame_index = int(row["frame_index"])
+        frame_index = checked_frame_index(row["frame_index"])
         self.target_rows[target_id][frame_index] = row  # a re-tracked frame: the later one wins
         box = box_tuple(row["box"])
         if all(math.isfinite(v) for v in box):
@@ -189,7 +193,7 @@ class _SessionBuilder:
         box = payload.get("box")
         event = SessionEvent(
             kind=str(payload["kind"]),
-            frame_index=int(payload["frame_index"]),
+            frame_index=checked_frame_index(payload["frame_index"]),
             target_id=payload.get("target_id"),
             box=None if box is None else box_tuple(box),
             wall_time=float(payload["wall_time"]),
@@ -207,8 +211,12 @@ class _SessionBuilder:
         assert self.metadata is not None
         metadata: dict[str, Any] = dict(self.metadata)
         fps = float(metadata.get("fps", DEFAULT_FPS))
+        if not (math.isfinite(fps) and fps > 0):
+            raise SessionError(f"its frame rate {metadata.get('fps')!r} is not a positive number")
         metadata["fps"] = fps
         metadata["tracker_params"] = json.loads(metadata.get("tracker_params") or "{}")
+        if not isinstance(metadata["tracker_params"], dict):
+            raise SessionError("its tracker_params are not a JSON object")
         last_frames = [max(rows) for rows in self.target_rows.values() if rows]
         last_frames += [int(q["frame_index"]) for q in self.pose_quality.values()]
         count = max(last_frames) + 1 if last_frames else 0
@@ -354,14 +362,17 @@ class _TargetColumns:
 
 def _iter_records(handle: BinaryIO, limit: int) -> Iterator[Any]:
     handle.seek(0)
-    reader = StreamReader(_PrefixReader(handle, limit), validate_crcs=True)
+    reader = StreamReader(_PrefixReader(handle, limit), validate_crcs=True, emit_chunks=True)
     records = reader.records
     while True:
         try:
             record = next(records)
         except (StopIteration, EndOfFile):
             return
-        yield record
+        if isinstance(record, Chunk):
+            yield from chunk_records(record)
+        else:
+            yield record
         if isinstance(record, DataEnd):
             return
 
@@ -395,17 +406,7 @@ def open_session(path: str | Path, *, load_maps: bool = False) -> Session:
             raise
         except SessionError as error:
             raise SessionError(f"{name} is corrupted: {error}") from error
-        except (
-            McapError,
-            CRCValidationError,
-            zstandard.ZstdError,
-            struct.error,
-            UnicodeDecodeError,
-            json.JSONDecodeError,
-            KeyError,
-            TypeError,
-            ValueError,
-        ) as error:
+        except DECODE_ERRORS as error:
             raise SessionError(
                 f"{name} is corrupted ({type(error).__name__}: {error}); "
                 "it cannot be read past this point"
@@ -419,7 +420,12 @@ def open_session(path: str | Path, *, load_maps: bool = False) -> Session:
             f"{name} is an MCAP file but not an AutoTrack session "
             f"(no '{SESSION_METADATA_NAME}' metadata record)"
         )
-    return builder.build(path, truncated=not complete, bytes_read=limit, file_size=size)
+    try:
+        return builder.build(path, truncated=not complete, bytes_read=limit, file_size=size)
+    except SessionError as error:
+        raise SessionError(f"{name} is corrupted: {error}") from error
+    except DECODE_ERRORS as error:
+        raise SessionError(f"{name} is corrupted ({type(error).__name__}: {error})") from error
 
 
 def _check_version(metadata: Mapping[str, str], name: str) -> None:

@@ -12,6 +12,13 @@ import math
 import cv2
 import numpy as np
 
+from autotrack.tracker.area_resample import (
+    area_path_is_generic,
+    area_paths_are_generic,
+    area_resize_crop,
+    area_resize_crops,
+)
+
 
 def resize_auto(patch: np.ndarray, size_hw: tuple[int, int]) -> np.ndarray:
     """Resize to (rows, cols): INTER_AREA when the area shrinks, INTER_LINEAR otherwise."""
@@ -62,8 +69,14 @@ def search_patch(
     output_size_hw: tuple[int, int],
 ) -> np.ndarray:
     """The search region around `position` resampled to the filter's fixed patch size."""
+    region = (max(int(region_size_hw[0]), 1), max(int(region_size_hw[1]), 1))
+    output = (int(output_size_hw[0]), int(output_size_hw[1]))
+    if area_path_is_generic(region, output):  # OpenCV's generic area shrink, computed exactly
+        top = math.floor(position[0]) - region[0] // 2
+        left = math.floor(position[1]) - region[1] // 2
+        return area_resize_crop(image, top, left, region, output)
     patch = crop_replicate(image, position, region_size_hw)
-    return resize_auto(np.ascontiguousarray(patch), output_size_hw)
+    return resize_auto(patch, output_size_hw)  # cv2 reads the strided view, no copy
 
 
 def scale_patches(
@@ -73,10 +86,24 @@ def scale_patches(
     scale_factors: np.ndarray,
     model_size_hw: tuple[int, int],
 ) -> np.ndarray:
-    """Patches of the target at each scale, resized to the scale model size: (N, rows, cols[, 3])."""
-    samples = []
-    for factor in scale_factors:
-        patch_size = np.maximum(np.floor(base_target_size_hw * factor), 2).astype(int)
-        patch = crop_replicate(image, position, (patch_size[0], patch_size[1]))
-        samples.append(resize_auto(patch, model_size_hw))
-    return np.stack(samples)
+    """Patches of the target at each scale, resized to the scale model size: (N, rows, cols[, 3]).
+
+    Each sample equals `resize_auto(crop_replicate(...))`; the ones OpenCV shrinks with its
+    generic area tables (nearly all) are computed together by `area_resample`, bit for bit.
+    """
+    factors = np.asarray(scale_factors, dtype=np.float64)
+    base = np.asarray(base_target_size_hw, dtype=np.float64)
+    sizes = np.maximum(np.floor(base[None, :] * factors[:, None]), 2).astype(np.int64)
+    model = (int(model_size_hw[0]), int(model_size_hw[1]))
+    generic = area_paths_are_generic(sizes, model)
+    tops = math.floor(position[0]) - sizes[:, 0] // 2
+    lefts = math.floor(position[1]) - sizes[:, 1] // 2
+    samples = np.empty((len(factors), *model, *image.shape[2:]), np.uint8)
+    if generic.any():
+        samples[generic] = area_resize_crops(
+            image, tops[generic], lefts[generic], sizes[generic], model
+        )
+    for index in np.flatnonzero(~generic):
+        patch = crop_replicate(image, position, (int(sizes[index, 0]), int(sizes[index, 1])))
+        samples[index] = resize_auto(patch, model)
+    return samples

@@ -1,0 +1,149 @@
+"""Who may talk to the server: a per-server secret token plus `Host` and `Origin` checks.
+
+Any web page the user visits can open a websocket to 127.0.0.1, and a DNS-rebinding page can
+even read HTTP answers; binding to loopback alone keeps out other machines, not other pages.
+So, as Jupyter does, the server makes a random token at start and prints it in its URL:
+
+- the page (`GET /?token=...`) is served only with the right token, and its answer sets a
+  `SameSite=Strict`, `HttpOnly` cookie holding the token (one name per port), so the page's
+  websocket (whose URL has no query) and its later requests carry it;
+- every request, the websocket handshake included, needs the token (query or cookie);
+- a request carrying an `Origin` header must come from the server's own origin (`Origin`
+  equal to `Host`): another site's page is refused even with the cookie;
+- `Host` must name this server (a loopback name, or the address it was bound to) unless it
+  listens on every interface, where the token alone decides: a rebinding name is refused.
+
+viser builds its websockets server inside `ViserServer.__init__` and offers no hook, so
+`guarded_handshakes` wraps `websockets.asyncio.server.serve` while the server starts and puts
+the check in front of viser's own `process_request`. If viser stops calling `serve` that way
+the check is not installed and the server refuses to start (`AccessGuard.installed`).
+"""
+
+from __future__ import annotations
+
+import contextlib
+import hmac
+import http
+import secrets
+import threading
+from collections.abc import Callable, Iterator
+from http.cookies import CookieError, SimpleCookie
+from urllib.parse import parse_qs, urlsplit
+
+from websockets.datastructures import Headers
+from websockets.http11 import Request, Response
+
+LOOPBACK_NAMES = frozenset({"127.0.0.1", "localhost", "::1"})
+"""Host names that mean this machine."""
+WILDCARD_HOSTS = frozenset({"0.0.0.0", "::", ""})
+"""Bind addresses meaning every interface."""
+
+ProcessRequest = Callable[[object, Request], Response | None]
+_PATCH_LOCK = threading.Lock()
+
+
+def new_token() -> str:
+    """A fresh random token (192 bits, URL-safe)."""
+    return secrets.token_urlsafe(24)
+
+
+def _host_name(netloc: str) -> str:
+    """The host part of `host[:port]` or `[v6]:port`, lower-cased."""
+    return (urlsplit(f"//{netloc}").hostname or "").lower()
+
+
+class AccessGuard:
+    """The check made on every HTTP request and websocket handshake."""
+
+    def __init__(self, token: str | None, bound_host: str) -> None:
+        self.token = token
+        """The secret (None: no token asked, the server was started with `--no-token`)."""
+        self.bound_host = bound_host
+        self.port = 0
+        """The port the server listens on (set once bound; it names the cookie)."""
+        self.installed = False
+        """True once the check sits in front of the server's handshakes."""
+        self.refused = 0
+        """Requests refused so far."""
+
+    @property
+    def cookie_name(self) -> str:
+        """The cookie carrying the token (per port: cookies do not separate ports)."""
+        return f"autotrack_token_{self.port}"
+
+    def host_allowed(self, host_header: str) -> bool:
+        """Whether a request's `Host` names this server."""
+        if self.bound_host in WILDCARD_HOSTS:
+            return True
+        name = _host_name(host_header)
+        return name in LOOPBACK_NAMES or name == self.bound_host.strip("[]").lower()
+
+    def _token_given(self, request: Request) -> tuple[bool, bool]:
+        """(the request carries the token, it came in the query string)."""
+        if self.token is None:
+            return True, False
+        query = parse_qs(urlsplit(request.path).query).get("token", [])
+        if any(hmac.compare_digest(value, self.token) for value in query):
+            return True, True
+        cookie = SimpleCookie()
+        try:
+            cookie.load(request.headers.get("Cookie", ""))
+        except CookieError:
+            return False, False
+        morsel = cookie.get(self.cookie_name)
+        return morsel is not None and hmac.compare_digest(morsel.value, self.token), False
+
+    def problem(self, request: Request) -> str | None:
+        """Why `request` is refused, or None when it may go on."""
+        host = request.headers.get("Host", "")
+        if not self.host_allowed(host):
+            return f"Host {host!r} does not name this server"
+        origin = request.headers.get("Origin")
+        if origin is not None and urlsplit(origin).netloc.lower() != host.lower():
+            return f"requests from {origin!r} are not accepted"
+        if not self._token_given(request)[0]:
+            return "the access token is missing or wrong: open the URL `autotrack app` printed"
+        return None
+
+    def wrap(self, inner: ProcessRequest | None) -> ProcessRequest:
+        """`inner` (viser's page server) behind the check; a good token in the query also
+        sets the cookie on the page's answer."""
+        self.installed = True
+
+        def process_request(connection: object, request: Request) -> Response | None:
+            reason = self.problem(request)
+            if reason is not None:
+                self.refused += 1
+                return Response(
+                    http.HTTPStatus.FORBIDDEN,
+                    "Forbidden",
+                    Headers({"Content-Type": "text/plain; charset=utf-8"}),
+                    f"Forbidden: {reason}\n".encode(),
+                )
+            response = None if inner is None else inner(connection, request)
+            if response is not None and self._token_given(request)[1]:
+                response.headers["Set-Cookie"] = (
+                    f"{self.cookie_name}={self.token}; Path=/; HttpOnly; SameSite=Strict"
+                )
+            return response
+
+        return process_request
+
+
+@contextlib.contextmanager
+def guarded_handshakes(guard: AccessGuard) -> Iterator[None]:
+    """While the block runs, every websockets server started gets `guard` in front of its
+    `process_request` (the block should start exactly one: viser's)."""
+    import websockets.asyncio.server as ws_server
+
+    with _PATCH_LOCK:
+        original = ws_server.serve
+
+        def serve(*args, process_request=None, **kwargs):  # noqa: ANN002, ANN003, ANN202
+            return original(*args, process_request=guard.wrap(process_request), **kwargs)
+
+        ws_server.serve = serve
+        try:
+            yield
+        finally:
+            ws_server.serve = original

@@ -1,0 +1,233 @@
+"""Uploads received straight to disk, with every limit enforced while the bytes arrive.
+
+viser's upload button keeps every part of a transfer in memory and joins them at the end, for a
+size the client only declares: a client declaring 100 GB grows the server without bound, and a
+file over the limit is refused only after all of it arrived. `UploadReceiver` takes over the two
+upload messages of a tab's GUI (`FileTransferStartUpload`, `FileTransferPart`): a transfer is
+refused at its start when its declared size, its type, the uploads quota or the free disk space
+say no; its parts are appended to a file under `incoming/` in order, and a part out of order or
+beyond the declared size ends it. Memory per transfer is one 512 kB part. A refused, broken or
+abandoned (tab closed) transfer's file is deleted at once, and leftovers of a killed server are
+deleted when the next one starts.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import os
+import shutil
+import threading
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+from typing import BinaryIO
+
+import viser
+from viser._messages import FileTransferPart, FileTransferPartAck, FileTransferStartUpload
+
+from app.paths import VIDEO_SUFFIXES, UploadLimits, folder_bytes, safe_file_name
+
+FREE_SPACE_RESERVE = 256 * 1024**2
+"""Disk space an upload must leave free (bytes), so a full disk never stops the recordings."""
+
+
+@dataclass
+class _Transfer:
+    """One upload in progress."""
+
+    tab_id: int
+    button: str
+    name: str
+    declared: int
+    part_count: int
+    path: Path
+    sink: BinaryIO
+    received: int = 0
+    next_part: int = 0
+
+
+@dataclass(frozen=True)
+class _Button:
+    """An upload button taken over: its tab, where finished files go, where refusals go."""
+
+    tab_id: int
+    deliver: Callable[[str, Path], None]
+    refuse: Callable[[str], None]
+
+
+class UploadReceiver:
+    """Receives the uploads of every tab's upload button into `incoming`."""
+
+    def __init__(self, incoming: Path, upload_dir: Path, limits: UploadLimits) -> None:
+        self.incoming = incoming
+        self.upload_dir = upload_dir
+        self.limits = limits
+        self._lock = threading.Lock()
+        self._buttons: dict[str, _Button] = {}
+        self._transfers: dict[str, _Transfer] = {}
+        self._interfaces: dict[int, object] = {}
+        shutil.rmtree(incoming, ignore_errors=True)  # what a killed server left behind
+        incoming.mkdir(parents=True, exist_ok=True)
+
+    def attach(
+        self,
+        gui: viser.GuiApi,
+        button: viser.GuiUploadButtonHandle,
+        tab_id: int,
+        deliver: Callable[[str, Path], None],
+        refuse: Callable[[str], None],
+    ) -> None:
+        """Receive `button`'s uploads: `deliver(name, path)` gets each complete file (it owns
+        the file from then on), `refuse(message)` each refusal."""
+        interface = gui._websock_interface  # noqa: SLF001 (viser offers no public hook)
+        handlers = interface._incoming_handlers  # noqa: SLF001
+        with self._lock:
+            self._buttons[button._impl.uuid] = _Button(tab_id, deliver, refuse)  # noqa: SLF001
+            if id(interface) in self._interfaces:
+                return
+            self._interfaces[id(interface)] = interface
+            for message_type, ours in (
+                (FileTransferStartUpload, self._start),
+                (FileTransferPart, self._part),
+            ):
+                viser_handler = getattr(gui, f"_handle_{_HANDLERS[message_type]}")
+                if viser_handler not in handlers.get(message_type, []):
+                    raise RuntimeError("viser's upload handlers are not where this app expects")
+                interface.unregister_handler(message_type, viser_handler)
+                interface.register_handler(message_type, _with_interface(ours, interface))
+
+    def forget_tab(self, tab_id: int) -> None:
+        """A tab closed: end its transfers (deleting their files) and forget its buttons."""
+        with self._lock:
+            for uuid in [uuid for uuid, button in self._buttons.items() if button.tab_id == tab_id]:
+                del self._buttons[uuid]
+            ended = [key for key, transfer in self._transfers.items() if transfer.tab_id == tab_id]
+            for key in ended:
+                _discard(self._transfers.pop(key))
+
+    def in_flight(self) -> int:
+        """Transfers in progress."""
+        with self._lock:
+            return len(self._transfers)
+
+    def _problem(self, tab_id: int, name: str, declared: int) -> str | None:
+        """Why a transfer must be refused at its start (called under the lock)."""
+        limits = self.limits
+        suffix = Path(safe_file_name(name)).suffix.lower()
+        if suffix != ".zip" and suffix not in VIDEO_SUFFIXES:
+            return f"cannot use {name!r}: upload a video or a .zip of images"
+        if declared <= 0:
+            return "the uploaded file is empty"
+        if declared > limits.max_upload_bytes:
+            return (
+                f"the upload is {declared / 1e6:.0f} MB; the limit is "
+                f"{limits.max_upload_bytes / 1e6:.0f} MB"
+            )
+        if any(transfer.tab_id == tab_id for transfer in self._transfers.values()):
+            return "an upload from this tab is still arriving; wait for it to finish"
+        pending = sum(transfer.declared for transfer in self._transfers.values())
+        if folder_bytes(self.upload_dir) + pending + declared > limits.max_upload_dir_bytes:
+            return (
+                f"the uploads folder would exceed its quota of "
+                f"{limits.max_upload_dir_bytes / 1e9:.1f} GB; ask the server's owner to clear it"
+            )
+        if shutil.disk_usage(self.incoming).free < pending + declared + FREE_SPACE_RESERVE:
+            return "the server's disk has no room for this upload"
+        return None
+
+    def _start(self, interface, client_id: int, message: FileTransferStartUpload) -> None:  # noqa: ANN001
+        with self._lock:
+            button = self._buttons.get(message.source_component_uuid)
+            if button is None or button.tab_id != client_id:
+                return
+            problem = self._problem(button.tab_id, message.filename, message.size_bytes)
+            if problem is None:
+                path = self.incoming / f"{os.getpid()}-{safe_file_name(message.transfer_uuid)}.part"
+                try:
+                    sink = open(path, "xb")  # noqa: SIM115 (closed when the transfer ends)
+                except OSError as error:
+                    problem = f"cannot receive the upload ({error.strerror})"
+                else:
+                    self._transfers[message.transfer_uuid] = _Transfer(
+                        button.tab_id,
+                        message.source_component_uuid,
+                        message.filename,
+                        message.size_bytes,
+                        message.part_count,
+                        path,
+                        sink,
+                    )
+        if problem is not None:
+            _ack(interface, message.source_component_uuid, message.transfer_uuid, 1, 1)
+            button.refuse(problem)
+
+    def _part(self, interface, client_id: int, message: FileTransferPart) -> None:  # noqa: ANN001
+        with self._lock:
+            transfer = self._transfers.get(message.transfer_uuid)
+            if transfer is None or transfer.tab_id != client_id:
+                return
+            button = self._buttons.get(transfer.button)
+            size = len(message.content)
+            problem = None
+            done = False
+            if (
+                message.part_index != transfer.next_part
+                or transfer.next_part >= transfer.part_count
+            ):
+                problem = "the upload arrived out of order; refused"
+            elif transfer.received + size > transfer.declared:
+                problem = "the upload is larger than it declared; refused"
+            else:
+                try:
+                    transfer.sink.write(message.content)
+                except OSError as error:
+                    problem = f"cannot store the upload ({error.strerror}); refused"
+            if problem is None:
+                transfer.received += size
+                transfer.next_part += 1
+                done = transfer.next_part == transfer.part_count
+                if done and transfer.received != transfer.declared:
+                    problem = "the upload is smaller than it declared; refused"
+            if problem is not None or done:
+                del self._transfers[message.transfer_uuid]
+                if problem is not None:
+                    _discard(transfer)
+                else:
+                    transfer.sink.close()
+        _ack(
+            interface, transfer.button, message.transfer_uuid, transfer.received, transfer.declared
+        )
+        if button is None:
+            if problem is None and done:
+                transfer.path.unlink(missing_ok=True)
+        elif problem is not None:
+            button.refuse(problem)
+        elif done:
+            button.deliver(transfer.name, transfer.path)
+
+
+_HANDLERS = {FileTransferStartUpload: "file_transfer_start", FileTransferPart: "file_transfer_part"}
+
+
+def _with_interface(handler, interface):  # noqa: ANN001, ANN202
+    """`handler` with the websocket interface its acknowledgements go to."""
+    return lambda client_id, message: handler(interface, client_id, message)
+
+
+def _ack(interface, button: str, transfer: str, received: int, total: int) -> None:  # noqa: ANN001
+    """Tell the browser's upload button how far the transfer is (it shows progress)."""
+    interface.queue_message(
+        FileTransferPartAck(
+            source_component_uuid=button,
+            transfer_uuid=transfer,
+            transferred_bytes=received,
+            total_bytes=total,
+        )
+    )
+
+
+def _discard(transfer: _Transfer) -> None:
+    """Close and delete a transfer's file."""
+    with contextlib.suppress(OSError):
+        transfer.sink.close()
+    transfer.path.unlink(missing_ok=True)
