@@ -33,6 +33,8 @@ from scipy.spatial.transform import Rotation
 
 from autotrack.errors import BoxError, InputError
 from autotrack.params import TrackerParams
+from autotrack.reacquire import LandmarkKeeper, ReacquireParams
+from autotrack.refine import PointRefiner, RefineParams, to_grey
 from autotrack.result import TrackResult
 from autotrack.scene import CameraIntrinsics, Scene
 
@@ -121,8 +123,16 @@ class LocalizationFrame:
     tracks: dict[str, TrackResult]
     """Tracker output per landmark id."""
     image_points: dict[str, tuple[float, float]]
-    """Box centre per landmark id (the point given to the solver)."""
+    """Point per landmark id given to the solver: the box centre, or the refined point when
+    refinement is on and accepted."""
     pose: PoseEstimate
+    box_centres: dict[str, tuple[float, float]] = field(default_factory=dict)
+    """The trackers' box centres (the raw points; equal to image_points without refinement)."""
+    refined: dict[str, bool] = field(default_factory=dict)
+    """Per landmark, whether the refined point replaced the box centre this frame."""
+    events: dict[str, str] = field(default_factory=dict)
+    """Landmark id -> what happened to it this frame beyond tracking ("out of view",
+    "re-acquired at (u, v), match m")."""
 
 
 @dataclass(frozen=True)
@@ -395,6 +405,10 @@ class Localizer:
         consecutive any more or the trackers were restarted)."""
         self._prior = None
         self._peaks.clear()
+
+    def forget_landmark(self, landmark_id: str) -> None:
+        """Forget a landmark's peak-score history (its tracker was restarted)."""
+        self._peaks.pop(landmark_id, None)
 
     def estimate(
         self,
@@ -708,12 +722,17 @@ def localize_sequence(
     localizer_params: LocalizerParams | None = None,
     assignment_known: bool = True,
     threads: int = 1,
+    refine_params: RefineParams | None = None,
+    reacquire_params: ReacquireParams | None = None,
 ) -> Iterator[LocalizationFrame]:
     """Track every landmark and estimate the camera pose frame by frame.
 
     `init_boxes` gives the first frame's boxes (x, y, w, h, 0-based pixels): landmark id -> box
     when `assignment_known`, otherwise a list (or a mapping with arbitrary keys) of boxes whose
-    landmarks the correspondence search finds on the first frame.
+    landmarks the correspondence search finds on the first frame. `refine_params` turns on the
+    sub-pixel refinement of the landmark points (autotrack.refine), `reacquire_params` the
+    out-of-view gating and re-acquisition of lost landmarks (autotrack.reacquire; it uses the
+    refiner's templates, so it turns refinement on with default settings if needed).
     """
     if assignment_known:
         if not isinstance(init_boxes, Mapping):
@@ -733,19 +752,53 @@ def localize_sequence(
 
     localizer = Localizer(scene, localizer_params or LocalizerParams())
     tracker = MultiTracker(tracker_params, tuple(boxes), threads=threads)
+    if reacquire_params is not None and refine_params is None:
+        refine_params = RefineParams()
+    refiner = PointRefiner(refine_params) if refine_params is not None else None
+    keeper = LandmarkKeeper(scene, reacquire_params) if reacquire_params is not None else None
     try:
         for frame_index, frame in enumerate(frames):
             if frame_index == 0:
                 _check_frame_size(frame, scene.camera)
             tracks = tracker.init(frame, boxes) if frame_index == 0 else tracker.update(frame)
             centres = {i: r.center for i, r in tracks.items()}
+            points, refined, events = dict(centres), {}, {}
+            if refiner is not None:
+                boxes_now = {i: r.box for i, r in tracks.items()}
+                found = (
+                    refiner.init(frame, boxes_now)
+                    if frame_index == 0
+                    else refiner.refine(frame, boxes_now)
+                )
+                points = {i: p.point for i, p in found.items()}
+                refined = {i: p.refined for i, p in found.items()}
+            if keeper is not None:
+                for landmark_id, why in keeper.out_of_view(frame_index).items():
+                    points[landmark_id] = (math.nan, math.nan)
+                    events[landmark_id] = why
             pose = localizer.estimate(
                 frame_index,
-                centres,
+                points,
                 confidences={i: r.peak_score for i, r in tracks.items()},
                 aberrant={i: r.aberrant for i, r in tracks.items()},
             )
-            yield LocalizationFrame(frame_index, tracks, centres, pose)
+            if keeper is not None and refiner is not None:
+                templates = {i: refiner.template_of(i) for i in boxes if refiner.has_template(i)}
+                for found_again in keeper.observe(
+                    frame_index, to_grey(frame), pose, boxes, templates
+                ):
+                    landmark_id = found_again.landmark_id
+                    tracker.reset_target(landmark_id, frame, found_again.box)
+                    refiner.restart(landmark_id)
+                    localizer.forget_landmark(landmark_id)
+                    u, v = (
+                        found_again.box[0] + found_again.box[2] / 2,
+                        found_again.box[1] + found_again.box[3] / 2,
+                    )
+                    events[landmark_id] = (
+                        f"re-acquired at ({u:.1f}, {v:.1f}), match {found_again.match:.2f}"
+                    )
+            yield LocalizationFrame(frame_index, tracks, points, pose, centres, refined, events)
     finally:
         tracker.close()
 
