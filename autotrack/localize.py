@@ -764,11 +764,12 @@ def localize_sequence(
             centres = {i: r.center for i, r in tracks.items()}
             points, refined, events = dict(centres), {}, {}
             if refiner is not None:
-                boxes_now = {i: r.box for i, r in tracks.items()}
+                # The template centre is the given first box's centre: the tracker's own first
+                # box is snapped to its grid and can be a pixel or two off.
                 found = (
-                    refiner.init(frame, boxes_now)
+                    refiner.init(frame, boxes)
                     if frame_index == 0
-                    else refiner.refine(frame, boxes_now)
+                    else refiner.refine(frame, {i: r.box for i, r in tracks.items()})
                 )
                 points = {i: p.point for i, p in found.items()}
                 refined = {i: p.refined for i, p in found.items()}

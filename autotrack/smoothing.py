@@ -110,6 +110,7 @@ class PoseSmoother:
 
     params: SmootherParams = field(default_factory=SmootherParams)
     _window: deque[_Step] = field(default_factory=deque, init=False, repr=False)
+    _last: _Step | None = field(default=None, init=False, repr=False)
     _gap: int = field(default=0, init=False, repr=False)
     _last_quaternion: np.ndarray | None = field(default=None, init=False, repr=False)
 
@@ -118,7 +119,7 @@ class PoseSmoother:
         out: list[PoseSample] = []
         if not sample.valid:
             self._gap += 1
-            if self._gap > self.params.max_gap_frames and self._window:
+            if self._gap > self.params.max_gap_frames and self._last is not None:
                 out += self.flush()
         elif self._gap > self.params.max_gap_frames:
             out += self.flush()
@@ -128,6 +129,7 @@ class PoseSmoother:
         if step is None:  # no running filter: nothing to smooth
             out.append(sample)
             return out
+        self._last = step
         self._window.append(step)
         if len(self._window) > self.params.lag_frames:
             out.append(self._smoothed_oldest())
@@ -140,6 +142,7 @@ class PoseSmoother:
         while self._window:
             out.append(self._smoothed_oldest())
             self._window.popleft()
+        self._last = None
         self._last_quaternion = None
         return out
 
@@ -160,7 +163,7 @@ class PoseSmoother:
 
     def _filter(self, sample: PoseSample) -> _Step | None:
         params = self.params
-        if not self._window:
+        if self._last is None:
             if not sample.valid:
                 return None
             values, variances = self._measurement(sample)
@@ -170,7 +173,7 @@ class PoseSmoother:
             cov[:, 0, 0] = variances
             cov[:, 1, 1] = 1.0
             return _Step(sample, mean, cov, mean, cov)
-        previous = self._window[-1]
+        previous = self._last
         dt = (sample.frame_index - previous.sample.frame_index) / params.fps
         f_pos, q_pos = constant_velocity_model(dt, params.position_acceleration)
         _, q_rot = constant_velocity_model(dt, params.rotation_acceleration)

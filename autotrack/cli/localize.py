@@ -100,6 +100,33 @@ def _add_localize(subparsers: argparse._SubParsersAction) -> None:
         help="record the run to this new MCAP session file (never overwritten; see "
         "`autotrack session`)",
     )
+    parser.add_argument(
+        "--no-refine",
+        action="store_true",
+        help="use the trackers' box centres as image points (no sub-pixel template alignment)",
+    )
+    parser.add_argument(
+        "--no-reacquire",
+        action="store_true",
+        help="do not gate landmarks the pose puts out of view nor restart lost ones where the "
+        "pose predicts them",
+    )
+    parser.add_argument(
+        "--smoothed",
+        type=Path,
+        default=None,
+        metavar="FILE",
+        help="also write the smoothed trajectory (constant-velocity Kalman + fixed-lag RTS) "
+        "here (TUM); --out keeps the raw per-frame poses",
+    )
+    parser.add_argument(
+        "--smooth-lag",
+        type=int,
+        default=3,
+        metavar="N",
+        help="smoother lag in frames: the smoothed pose of a frame uses N later frames, a "
+        "latency of N / fps seconds (default 3; 0 = causal Kalman filter)",
+    )
     parser.add_argument("--quiet", action="store_true", help="no progress bar")
     parser.set_defaults(func=run_localize)
 
@@ -146,6 +173,9 @@ def run_localize(args: argparse.Namespace) -> int:
 
     from autotrack.frames import open_frames
     from autotrack.localize import LocalizerParams, localize_sequence
+    from autotrack.reacquire import ReacquireParams
+    from autotrack.refine import RefineParams
+    from autotrack.smoothing import SmootherParams
 
     scene_path = _default_file(args.scene, args.sequence, "scene.json", "--scene")
     scene = load_scene(scene_path)
@@ -164,10 +194,15 @@ def run_localize(args: argparse.Namespace) -> int:
         from autotrack.localize import read_tum
 
         gt = read_tum(args.gt)
+    if args.no_reacquire is False and args.no_refine:
+        raise InputError("re-acquisition needs the refiner's templates: add --no-reacquire")
+    if args.smooth_lag < 0:
+        raise InputError("--smooth-lag must be 0 or more")
     frames = open_frames(args.sequence)
     fps = args.fps or frames.fps or DEFAULT_FPS
     if fps <= 0:
         raise InputError("--fps must be positive")
+    smoother = SmootherParams(fps=fps, lag_frames=args.smooth_lag) if args.smoothed else None
     records = []
     tracker_params = preset(args.preset)
     recorder = _open_recorder(args.session, args.sequence, tracker_params, scene_path, fps)
@@ -181,6 +216,8 @@ def run_localize(args: argparse.Namespace) -> int:
             localizer_params,
             assignment_known=isinstance(init, dict),
             threads=args.threads,
+            refine_params=None if args.no_refine else RefineParams(),
+            reacquire_params=None if args.no_reacquire else ReacquireParams(),
         )
         for record in pipeline:
             records.append(record)
@@ -188,7 +225,9 @@ def run_localize(args: argparse.Namespace) -> int:
                 _record_frame(recorder, record, scene)
             progress.update()
     timestamps = np.arange(len(records)) / fps
-    report = summarise(records, timestamps, scene, args.out, args.tracks, gt, frames.name)
+    report = summarise(
+        records, timestamps, scene, args.out, args.tracks, gt, frames.name, args.smoothed, smoother
+    )
     print(report)
     if args.session is not None:
         print(f"session recorded to {args.session}")
@@ -235,8 +274,13 @@ def summarise(
     tracks: Path | None,
     gt: tuple[np.ndarray, np.ndarray, np.ndarray] | None,
     name: str,
+    smoothed_out: Path | None = None,
+    smoother: Any = None,
 ) -> str:
-    """Write the requested files and return the text report (`name` labels the Table-3 row)."""
+    """Write the requested files and return the text report (`name` labels the Table-3 row).
+
+    With `smoothed_out` and `smoother` (SmootherParams) the smoothed trajectory is written there
+    too and gets its own Table-3 row."""
     from autotrack.localize import format_table3, trajectory_errors, write_tum
 
     positions = np.array([r.pose.position for r in records]).reshape(-1, 3)
@@ -255,10 +299,35 @@ def summarise(
         tracks.parent.mkdir(parents=True, exist_ok=True)
         write_tracks_csv(tracks, records, timestamps, scene)
         lines.append(f"per-frame tracks written to {tracks}")
+    smoothed_positions = None
+    if smoothed_out is not None and smoother is not None:
+        from autotrack.smoothing import samples_from_poses, smooth_poses
+
+        samples = list(smooth_poses(samples_from_poses([r.pose for r in records]), smoother))
+        smoothed_positions = np.array([p.position for p in samples]).reshape(-1, 3)
+        smoothed_out.parent.mkdir(parents=True, exist_ok=True)
+        written = write_tum(
+            smoothed_out,
+            timestamps,
+            smoothed_positions,
+            np.array([p.quaternion_xyzw for p in samples]).reshape(-1, 4),
+        )
+        lines.append(
+            f"smoothed poses written to {smoothed_out} ({written} rows, latency "
+            f"{smoother.lag_frames} frames = {smoother.latency_s:.2f} s)"
+        )
     if gt is not None:
         gt_times, gt_positions, _ = gt
         errors = trajectory_errors(timestamps, positions, gt_times, gt_positions)
         lines.append(format_table3([(name, errors)]))
+        if smoothed_positions is not None:
+            smoothed_errors = trajectory_errors(
+                timestamps, smoothed_positions, gt_times, gt_positions
+            )
+            lines.append(
+                f"smoothed: RMSE {smoothed_errors.rmse_cm:.2f} cm, max "
+                f"{smoothed_errors.max_error_cm:.2f} cm over {smoothed_errors.frames} frames"
+            )
         large = int(np.sum(errors.errors_cm > LARGE_ERROR_CM))
         lines.append(f"valid frames more than {LARGE_ERROR_CM:g} cm off: {large}")
     return "\n".join(lines)
@@ -269,7 +338,8 @@ def write_tracks_csv(
 ) -> None:
     """One row per frame: pose (NaN when invalid), validity, landmarks used and left out (why),
     reason when invalid, and per landmark its box, peak score, aberrance flag and reprojection
-    error."""
+    error; then per landmark the point given to the solver and whether it was refined, and the
+    frame's landmark events (out of view, re-acquired)."""
     ids = scene.landmark_ids
     header = ["frame", "timestamp", "valid", "tx", "ty", "tz", "qx", "qy", "qz", "qw"]
     header += ["rms_px", "position_std_m", "used", "excluded", "reason"]
@@ -277,6 +347,10 @@ def write_tracks_csv(
         header += [
             f"{landmark_id}_{k}" for k in ("x", "y", "w", "h", "peak", "aberrant", "error_px")
         ]
+    # The point given to the solver (refined or box centre) and what happened to the landmark.
+    for landmark_id in ids:
+        header += [f"{landmark_id}_{k}" for k in ("u", "v", "refined")]
+    header.append("events")
     with path.open("w", newline="", encoding="utf-8") as handle:
         writer = csv.writer(handle)
         writer.writerow(header)
@@ -296,6 +370,10 @@ def write_tracks_csv(
                     row += [f"{v:.2f}" for v in track.box]
                     row += [f"{track.peak_score:.4f}", int(track.aberrant)]
                 row.append(f"{pose.reprojection_errors.get(landmark_id, math.nan):.3f}")
+            for landmark_id in ids:
+                u, v = record.image_points.get(landmark_id, (math.nan, math.nan))
+                row += [f"{u:.3f}", f"{v:.3f}", int(record.refined.get(landmark_id, False))]
+            row.append("; ".join(f"{k} {what}" for k, what in record.events.items()))
             writer.writerow(row)
 
 
