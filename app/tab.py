@@ -49,6 +49,7 @@ from autotrack.localize import PoseEstimate, read_tum
 from autotrack.params import PRESETS, preset
 from autotrack.scene import load_scene
 from autotrack.sessions import last_state, open_session
+from autotrack.smoothing import SmootherParams, smoothed_positions
 
 if TYPE_CHECKING:
     from app.server import StudioServer
@@ -61,6 +62,8 @@ MAPS_OFF = "off"
 MAPS_RESPONSE = "response map on frame"
 MAPS_VARIATION = "local variation on frame"
 MAPS_PANELS = "panels (per target)"
+TRAJECTORY_RAW = "raw poses"
+TRAJECTORY_SMOOTHED = "smoothed (0.3 s lag)"
 
 GUI_FPS = 30.0
 """Most video-panel updates per second (viser keeps only the latest anyway)."""
@@ -234,6 +237,11 @@ class Tab:
                 options=(MAPS_OFF, MAPS_RESPONSE, MAPS_VARIATION, MAPS_PANELS),
                 initial_value=MAPS_RESPONSE,
             )
+            self.trajectory_dropdown = gui.add_dropdown(
+                "3-D trajectory",
+                options=(TRAJECTORY_RAW, TRAJECTORY_SMOOTHED),
+                initial_value=TRAJECTORY_RAW,
+            )
             self.canvas_fps_slider = gui.add_slider(
                 "Canvas frames/s cap",
                 min=1,
@@ -272,6 +280,7 @@ class Tab:
         self.canvas_dropdown.on_update(self._user_edit(self._canvas_mode_changed))
         self.maps_dropdown.on_update(self._user_edit(self._maps_changed))
         self.canvas_fps_slider.on_update(self._user_edit(self._wake_display))
+        self.trajectory_dropdown.on_update(self._user_edit(self._maps_changed))
         self.download_tracks_button.on_click(lambda _: self._submit(self._download, "tracks"))
         self.download_poses_button.on_click(lambda _: self._submit(self._download, "poses"))
         self.download_mcap_button.on_click(lambda _: self._submit(self._download, "mcap"))
@@ -711,6 +720,9 @@ class Tab:
         pose_view = None
         if run.scene is not None:
             trajectory = list(run.valid_positions())
+            if self.trajectory_dropdown.value == TRAJECTORY_SMOOTHED:
+                fps = run.frames.fps or 10.0
+                trajectory = smoothed_positions(run.poses, SmootherParams(fps=fps))
             pose = run.poses.get(frame_index)
             last_valid = next(
                 (

@@ -18,7 +18,7 @@ from __future__ import annotations
 
 import math
 from collections import deque
-from collections.abc import Iterable, Iterator, Sequence
+from collections.abc import Iterable, Iterator, Mapping, Sequence
 from dataclasses import dataclass, field, replace
 
 import numpy as np
@@ -231,3 +231,12 @@ def samples_from_poses(poses: Sequence) -> list[PoseSample]:
         )
         for p in poses
     ]
+
+
+def smoothed_positions(
+    poses: Mapping[int, object], params: SmootherParams
+) -> list[tuple[int, np.ndarray]]:
+    """(frame index, smoothed camera position) of the valid frames of `poses` (frame index ->
+    PoseEstimate), in frame order: the smoothed counterpart of a raw trajectory."""
+    samples = samples_from_poses([poses[index] for index in sorted(poses)])
+    return [(s.frame_index, s.position) for s in smooth_poses(samples, params) if s.valid]

@@ -424,6 +424,26 @@ def test_playing_tracks_every_target_and_estimates_poses(studio) -> None:
     _wait_for(lambda: (data := tab.plots.data_of(0)) is not None and len(data[0]) == last + 1)
 
 
+def test_3d_view_switches_between_raw_and_smoothed_trajectories(studio) -> None:
+    tab, _ = _open_tab(studio)
+    _draw_demo_boxes(tab)
+    tab.frame_slider.value = 9
+    assert tab.wait_idle()
+    _wait_for(lambda: len(tab.view3d.trajectory_drawn) == 9)
+    raw = np.array(tab.view3d.trajectory_drawn)
+    np.testing.assert_allclose(raw[-1], tab.run.poses[8].position)
+
+    tab.trajectory_dropdown.value = "smoothed (0.3 s lag)"
+    assert tab.wait_idle()
+    _wait_for(lambda: not np.allclose(tab.view3d.trajectory_drawn, raw))
+    smoothed = np.array(tab.view3d.trajectory_drawn)
+    assert smoothed.shape == raw.shape and np.max(np.abs(smoothed - raw)) < 0.05
+
+    tab.trajectory_dropdown.value = "raw poses"
+    assert tab.wait_idle()
+    _wait_for(lambda: np.allclose(tab.view3d.trajectory_drawn, raw))
+
+
 def test_map_panels_show_each_targets_response_and_local_variation(studio) -> None:
     tab, _ = _open_tab(studio)
     _draw_demo_boxes(tab)
