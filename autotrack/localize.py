@@ -416,11 +416,14 @@ class Localizer:
         points: Mapping[str, tuple[float, float]],
         confidences: Mapping[str, float] | None = None,
         aberrant: Mapping[str, bool] | None = None,
+        landmark_weights: Mapping[str, float] | None = None,
     ) -> PoseEstimate:
         """Pose for one frame from landmark id -> image point (u, v), 0-based pixels.
 
-        `confidences` are tracker peak scores, `aberrant` the tracker's aberrance flags; both
-        optional. Unknown ids raise SceneError; missing or non-finite points count as lost.
+        `confidences` are tracker peak scores, `aberrant` the tracker's aberrance flags,
+        `landmark_weights` per-landmark weights in the refinement (default 1, multiplied with the
+        aberrant weight); all optional. Unknown ids raise SceneError; missing or non-finite
+        points count as lost.
         """
         params = self.params
         confidences = confidences or {}
@@ -446,6 +449,7 @@ class Localizer:
                 )
                 continue
             weight = params.aberrant_weight if aberrant.get(landmark_id, False) else 1.0
+            weight *= (landmark_weights or {}).get(landmark_id, 1.0)
             if weight <= 0.0:
                 excluded[landmark_id] = "aberrant"
                 continue
@@ -782,6 +786,7 @@ def localize_sequence(
                 points,
                 confidences={i: r.peak_score for i, r in tracks.items()},
                 aberrant={i: r.aberrant for i, r in tracks.items()},
+                landmark_weights=fallback_weights(refined, refine_params),
             )
             if keeper is not None and refiner is not None:
                 templates = {i: refiner.template_of(i) for i in boxes if refiner.has_template(i)}
@@ -802,6 +807,16 @@ def localize_sequence(
             yield LocalizationFrame(frame_index, tracks, points, pose, centres, refined, events)
     finally:
         tracker.close()
+
+
+def fallback_weights(
+    refined: Mapping[str, bool], params: RefineParams | None
+) -> dict[str, float] | None:
+    """Solver weights when refinement is on: a landmark whose refined point was rejected (its
+    box centre is pixels off) counts `params.fallback_weight` while three others are refined."""
+    if params is None or sum(refined.values()) < 3:
+        return None
+    return {i: 1.0 if ok else params.fallback_weight for i, ok in refined.items()}
 
 
 def _check_frame_size(frame: np.ndarray, camera: CameraIntrinsics) -> None:

@@ -29,7 +29,7 @@ Box = tuple[float, float, float, float]
 class RefineParams:
     """Settings of the template alignment that sharpens each landmark's image point."""
 
-    min_correlation: float = 0.8
+    min_correlation: float = 0.7
     """Smallest ECC correlation coefficient (0-1) at which the refined point is used."""
     max_offset_fraction: float = 0.2
     """The refined point must lie within this fraction of the box size (the larger side) of the
@@ -47,6 +47,10 @@ class RefineParams:
     """ECC stops when the warp changes by less than this between iterations."""
     blur_size: int = 3
     """Gaussian blur (odd kernel size, pixels) ECC applies to both images; 1 disables."""
+    fallback_weight: float = 0.05
+    """Weight in the pose solve of a landmark whose refined point was rejected (its box centre
+    is used), while at least three others are refined: box centres are a few pixels off where
+    refined points are a few tenths, (0.2 / 1)^2 ~ 0.05."""
     max_stale_frames: int = 5
     """After this many frames without an accepted alignment the homography is rebuilt from the
     tracker's box instead of the last accepted one."""
