@@ -33,23 +33,20 @@ from pathlib import Path
 
 import numpy as np
 
-from autotrack.frames import open_frames
-from autotrack.localize import (
-    Localizer,
-    LocalizerParams,
-    TrajectoryErrors,
-    box_centre,
-    format_table3,
-    localize_sequence,
-    project_points,
-    read_tum,
-    trajectory_errors,
-    write_tum,
-)
+from autotrack.io.frames import open_frames
+from autotrack.io.tum import read_tum, write_tum
+from autotrack.localization.camera import project_points
+from autotrack.localization.localizer import Localizer, LocalizerParams
+from autotrack.localization.pnp import box_centre
+from autotrack.localization.reacquire import ReacquireParams
+from autotrack.localization.refine import RefineParams
+from autotrack.localization.scene import load_scene
+from autotrack.localization.smoothing import SmootherParams, samples_from_poses, smooth_poses
+from autotrack.localization.trajectory import TrajectoryErrors, format_table3, trajectory_errors
 from autotrack.params import PRESETS, preset
-from autotrack.reacquire import ReacquireParams
-from autotrack.refine import RefineParams
-from autotrack.scenarios import (
+from autotrack.pipeline import localize_sequence
+from autotrack.synthetic.renderer import render_sequence
+from autotrack.synthetic.scenarios import (
     BACK_FRACTION,
     ScenarioSpec,
     hidden_spans,
@@ -57,15 +54,8 @@ from autotrack.scenarios import (
     render_scenario,
     scenario_specs,
 )
-from autotrack.scene import load_scene
-from autotrack.smoothing import SmootherParams, samples_from_poses, smooth_poses
-from autotrack.synthetic import (
-    RenderSettings,
-    SequenceSpec,
-    read_ground_truth_boxes,
-    render_sequence,
-    sequence_specs,
-)
+from autotrack.synthetic.testbed import read_ground_truth_boxes, sequence_specs
+from autotrack.synthetic.trajectories import RenderSettings, SequenceSpec
 
 LARGE_ERROR_CM = 20.0
 PAPER_RMSE_CM = 3.44
@@ -180,8 +170,8 @@ def evaluate(folder: Path, preset_name: str) -> SequenceResult:
             raw_localizer.estimate(
                 k,
                 raw_points,
-                {i: t.peak_score for i, t in record.tracks.items()},
-                {i: t.aberrant for i, t in record.tracks.items()},
+                {i: t.peak_score for i, t in record.landmark_tracks.items()},
+                {i: t.aberrant for i, t in record.landmark_tracks.items()},
             )
         )
         in_view = [i for i in ids if visible is None or visible[i][k] >= BACK_FRACTION]
@@ -213,28 +203,39 @@ def evaluate(folder: Path, preset_name: str) -> SequenceResult:
 
     reacquired = []
     if visible is not None:
-        rotations = _rotations(gt_quaternions)
-        for landmark_id in ids:
-            for _, back in hidden_spans(visible[landmark_id]):
-                if back >= count:
-                    continue
-                delay = None
-                for k in range(back, count):
-                    pose = records[k].pose
-                    if not pose.valid or landmark_id not in pose.used_landmarks:
-                        continue
-                    expected = project_points(
-                        scene.camera,
-                        scene.object_points((landmark_id,)),
-                        rotations[k],
-                        gt_positions[k],
-                    )[0]
-                    point = records[k].image_points[landmark_id]
-                    if math.dist(point, expected) <= REACQUIRED_WITHIN_PX:
-                        delay = k - back
-                        break
-                reacquired.append((landmark_id, back, delay))
+        reacquired = _reacquisition_delays(records, scene, visible, gt_positions, gt_quaternions)
     return SequenceResult(folder.name, rows, reacquired, time.perf_counter() - start)
+
+
+def _reacquisition_delays(
+    records: list, scene, visible: dict, gt_positions: np.ndarray, gt_quaternions: np.ndarray
+) -> list[tuple[str, int, int | None]]:
+    """Per hidden span: (landmark, frame it is back in view, frames until it is used again with
+    its point within REACQUIRED_WITHIN_PX of its true projection; None: never)."""
+    count = len(records)
+    rotations = _rotations(gt_quaternions)
+    reacquired = []
+    for landmark_id in scene.landmark_ids:
+        for _, back in hidden_spans(visible[landmark_id]):
+            if back >= count:
+                continue
+            delay = None
+            for k in range(back, count):
+                pose = records[k].pose
+                if not pose.valid or landmark_id not in pose.used_landmarks:
+                    continue
+                expected = project_points(
+                    scene.camera,
+                    scene.object_points((landmark_id,)),
+                    rotations[k],
+                    gt_positions[k],
+                )[0]
+                point = records[k].image_points[landmark_id]
+                if math.dist(point, expected) <= REACQUIRED_WITHIN_PX:
+                    delay = k - back
+                    break
+            reacquired.append((landmark_id, back, delay))
+    return reacquired
 
 
 def _rotations(quaternions_xyzw: np.ndarray) -> np.ndarray:

@@ -38,8 +38,8 @@ def _single_thread_env() -> None:
 
 def run_tracker(tracker: str, colour_table: str | None) -> dict:
     """All dev sequences with one tracker, in this (fresh) process."""
-    from autotrack.benchmark import run_task
-    from autotrack.datasets import load_sequences
+    from autotrack.evaluation.benchmark import run_task
+    from autotrack.evaluation.datasets import load_sequences
 
     per_sequence = {}
     for sequence in load_sequences(SHARED / "sequences"):
@@ -56,11 +56,12 @@ def _in_fresh_process(tracker: str, colour_table: str | None) -> dict:
 
 def multi_target_pose(frames_count: int, threads: int) -> tuple[float, int, float]:
     """Seconds per frame of four AutoTrack targets + the pose step on rendered 1280x720 frames."""
-    from autotrack.frames import open_frames
-    from autotrack.localize import localize_sequence
+    from autotrack.io.frames import open_frames
+    from autotrack.localization.scene import load_scene
     from autotrack.params import preset
-    from autotrack.scene import load_scene
-    from autotrack.synthetic import render_sequence, sequence_specs
+    from autotrack.pipeline import localize_sequence
+    from autotrack.synthetic.renderer import render_sequence
+    from autotrack.synthetic.testbed import sequence_specs
 
     spec = sequence_specs(1, frames=frames_count, seed=3)[0]
     with tempfile.TemporaryDirectory() as folder:
@@ -89,8 +90,8 @@ def guard(boxes_by_sequence: dict[str, np.ndarray]) -> bool:
     mean precision@20 or mean AUC over the twelve sequences moving by more than 0.01 (the spec's
     bound for rounding noise), or a sequence whose boxes differ from its very first frames.
     """
-    from autotrack.datasets import read_boxes
-    from autotrack.evaluation import score_sequence
+    from autotrack.evaluation.metrics import score_sequence
+    from autotrack.io.otb_boxes import read_boxes
 
     print(
         f"\nregression guard (AutoTrack + published table vs {REFERENCE.name}/, {TOLERANCE_PX} px)"

@@ -10,13 +10,16 @@ import numpy as np
 import pytest
 
 from autotrack.cli import main
-from autotrack.frames import open_frames
-from autotrack.localize import localize_sequence, read_tum, trajectory_errors
+from autotrack.io.frames import open_frames
+from autotrack.io.tum import read_tum
+from autotrack.localization.reacquire import ReacquireParams
+from autotrack.localization.refine import RefineParams
+from autotrack.localization.scene import load_scene
+from autotrack.localization.trajectory import trajectory_errors
 from autotrack.params import preset
-from autotrack.reacquire import ReacquireParams
-from autotrack.refine import RefineParams
-from autotrack.scene import load_scene
-from autotrack.synthetic import RenderSettings, SequenceSpec, render_sequence
+from autotrack.pipeline import localize_sequence
+from autotrack.synthetic.renderer import render_sequence
+from autotrack.synthetic.trajectories import RenderSettings, SequenceSpec
 
 
 @pytest.fixture(scope="module")
@@ -45,7 +48,7 @@ def test_refined_points_give_a_better_trajectory_than_box_centres(sequence):
     refined = trajectory_errors(
         stamps, np.array([r.pose.position for r in records]), gt_times, gt_positions
     )
-    from autotrack.localize import Localizer
+    from autotrack.localization.localizer import Localizer
 
     localizer = Localizer(scene)
     raw_positions = np.array(
@@ -87,8 +90,11 @@ def test_cli_refuses_reacquisition_without_refinement(sequence, capsys):
 
 
 def test_a_landmark_whose_refinement_was_rejected_counts_little():
-    from autotrack.localize import Localizer, fallback_weights, project_points
-    from autotrack.synthetic import default_camera, default_scene, look_at
+    from autotrack.localization.camera import project_points
+    from autotrack.localization.localizer import Localizer
+    from autotrack.localization.refine import fallback_weights
+    from autotrack.synthetic.trajectories import look_at
+    from autotrack.synthetic.world import default_camera, default_scene
 
     scene = default_scene(default_camera(1280, 720))
     position = np.array([0.2, 1.2, 1.4])
@@ -107,3 +113,50 @@ def test_a_landmark_whose_refinement_was_rejected_counts_little():
     off_equal = np.linalg.norm(equal.position - position)
     off_weighted = np.linalg.norm(weighted.position - position)
     assert off_weighted < 0.5 * off_equal  # measured: 0.87 cm instead of 2.26 cm
+
+
+def test_pipeline_refines_through_corrections_deletions_and_seeks(sequence):
+    from autotrack.io.frames import open_frames as open_sequence
+    from autotrack.pipeline import Pipeline
+
+    scene = load_scene(sequence / "scene.json")
+    boxes = json.loads((sequence / "boxes.json").read_text())
+    with Pipeline(
+        open_sequence(sequence),
+        preset("autotrack"),
+        scene=scene,
+        refine_params=RefineParams(),
+        reacquire_params=ReacquireParams(),
+    ) as pipeline:
+        ids = pipeline.add_targets(0, boxes)
+        pipeline.track_to(12)
+        before = {k: pipeline.outcome(k) for k in range(13)}
+        assert all(before[k].pose.valid for k in range(13))
+        assert all(sum(before[k].refined.values()) >= 3 for k in range(1, 13))
+        others = {t: dict(pipeline.targets[t].results) for t in ids[:2]}
+
+        # A correction at frame 5 (the target's own box there): only that target is re-tracked,
+        # the poses from frame 5 on are solved again from the points kept per target.
+        corrected = ids[2]
+        pipeline.place_box(corrected, 5, pipeline.targets[corrected].results[5].box)
+        assert pipeline.targets[corrected].last_frame == 5
+        assert sorted(pipeline.poses) == list(range(6))
+        pipeline.track_to(12)
+        assert sorted(pipeline.poses) == list(range(13))
+        for target_id, results in others.items():
+            assert pipeline.targets[target_id].results == results
+        for k in range(6, 13):
+            outcome = pipeline.outcome(k)
+            assert outcome.pose.valid and sum(outcome.refined.values()) >= 3
+            for landmark in ("A", "B"):  # untouched targets: the same points as before
+                assert outcome.image_points[landmark] == before[k].image_points[landmark]
+            offset = np.linalg.norm(outcome.pose.position - before[k].pose.position)
+            assert offset < 0.02
+
+        # Deleting a target: the other three keep being refined, without its point (three
+        # landmarks give no pose without a continuity prior, which the deletion reset).
+        pipeline.delete_target(ids[3], 12)
+        pipeline.track_to(15)
+        outcome = pipeline.outcome(15)
+        assert outcome.refined == {"A": True, "B": True, "C": True}
+        assert outcome.pose.excluded_landmarks == {"D": "lost"}

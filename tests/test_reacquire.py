@@ -11,10 +11,12 @@ import cv2
 import numpy as np
 import pytest
 
-from autotrack.localize import PoseEstimate, project_points
-from autotrack.reacquire import LandmarkKeeper, ReacquireParams, match_scaled_template
-from autotrack.refine import PointRefiner, to_grey
-from autotrack.scenarios import (
+from autotrack.localization.camera import project_points
+from autotrack.localization.reacquire import LandmarkKeeper, ReacquireParams, match_scaled_template
+from autotrack.localization.refine import PointRefiner, to_grey
+from autotrack.result import PoseEstimate
+from autotrack.synthetic.renderer import Renderer
+from autotrack.synthetic.scenarios import (
     CASES,
     Occluder,
     ScenarioSpec,
@@ -24,16 +26,13 @@ from autotrack.scenarios import (
     scenario_specs,
     visibility,
 )
-from autotrack.synthetic import (
-    Renderer,
+from autotrack.synthetic.trajectories import (
     RenderSettings,
     SequenceSpec,
     _yaw_pitch,
-    default_camera,
-    default_scene,
     ground_truth_poses,
-    landmark_box,
 )
+from autotrack.synthetic.world import default_camera, default_scene, landmark_box
 
 CAMERA = default_camera(640, 360)
 SCENE = default_scene(CAMERA)

@@ -10,14 +10,14 @@ import cv2
 import numpy as np
 import pytest
 
-from autotrack.refine import (
+from autotrack.localization.refine import (
     PointRefiner,
     RefineParams,
     about_point,
     homography_scale,
     map_point,
 )
-from autotrack.synthetic import landmark_texture
+from autotrack.synthetic.textures import landmark_texture
 
 SIZE = (320, 240)
 TEXTURE = landmark_texture("star", np.random.default_rng(0))

@@ -9,7 +9,7 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 from autotrack.errors import InputError
-from autotrack.smoothing import (
+from autotrack.localization.smoothing import (
     PoseSample,
     PoseSmoother,
     SmootherParams,
