@@ -27,6 +27,8 @@ from autotrack.errors import InputError
 from autotrack.io.boxes_json import read_boxes_json
 from autotrack.io.frames import FrameSource, open_frames
 from autotrack.localization.pnp import boxes_by_landmark
+from autotrack.localization.reacquire import ReacquireParams
+from autotrack.localization.refine import RefineParams
 from autotrack.localization.scene import Scene, load_scene
 from autotrack.params import PRESETS, preset
 from autotrack.pipeline import Pipeline, Recording, TrackedTarget
@@ -34,6 +36,9 @@ from autotrack.sessions import open_session
 from autotrack.sessions.snapshot import finished_copy
 
 EXPORTS = ("tracks", "poses", "mcap")
+POSE_OPTIONS = {"refine_params": RefineParams(), "reacquire_params": ReacquireParams()}
+"""With a scene, the pipeline gives the solver sub-pixel landmark points and re-acquires lost
+landmarks, as `autotrack localize` does."""
 """What `export` can build: the tracks zip, the TUM poses, the session file itself."""
 
 
@@ -177,6 +182,7 @@ class TabController:
                 scene=scene,
                 recording=self._recording(path, scene_path),
                 tracker_threads=self.config.tracker_threads,
+                **POSE_OPTIONS,
             )
         except Exception:
             frames.close()
@@ -440,6 +446,7 @@ class TabController:
                 scene=scene,
                 recording=self._recording(source, scene_path),
                 tracker_threads=self.config.tracker_threads,
+                **POSE_OPTIONS,
             )
         except Exception:
             frames.close()

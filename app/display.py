@@ -27,11 +27,18 @@ from app.canvas import (
     thumbnail,
 )
 from app.channel import ClientChannel
-from app.panels import CANVAS_3D, CANVAS_FRAME, MAP_KINDS, MAPS_PANELS, Panels
+from app.panels import (
+    CANVAS_3D,
+    CANVAS_FRAME,
+    MAP_KINDS,
+    MAPS_PANELS,
+    TRAJECTORY_SMOOTHED,
+    Panels,
+)
 from app.plots import SignalPlots
 from app.truthplots import TruthPlots
 from app.view3d import SceneView
-from app.views import FrameView
+from app.views import FrameView, smoothed_view
 
 GUI_FPS = 30.0
 """Most video-panel updates per second (viser keeps only the latest anyway)."""
@@ -318,7 +325,10 @@ class DisplayLoop:
         self.plots.update(view.history, view.frame_index)
         self.truth_plots.update(view.truth, view.frame_index)
         self.stats.plot_updates += 1
-        if view.pose_view is not None:
-            self.view3d.update(view.pose_view, thumbnail(view.frame))
+        pose_view = view.pose_view
+        if pose_view is not None:
+            if self.panels.display.trajectory.value == TRAJECTORY_SMOOTHED:
+                pose_view = smoothed_view(pose_view)
+            self.view3d.update(pose_view, thumbnail(view.frame))
             self.stats.scene_updates += 1
         self.stats.map_panel_updates += self.map_panels.update(view, maps == MAPS_PANELS)

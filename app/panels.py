@@ -35,6 +35,8 @@ MAP_KINDS = {
     MAPS_VARIATION: "local_variation",
     MAPS_VARIATION_TARGET: "local_variation_target",
 }
+TRAJECTORY_RAW = "raw poses"
+TRAJECTORY_SMOOTHED = "smoothed (0.3 s lag)"
 """Maps choice -> the map `draw_overlays` blends over the frame."""
 
 
@@ -163,10 +165,13 @@ def _playback_panel(gui: viser.GuiApi) -> PlaybackPanel:
 
 @dataclass
 class DisplayPanel:
-    """The Display folder: canvas mode, maps, canvas frame-rate cap (and the Maps folder)."""
+    """The Display folder: canvas mode, maps, 3-D trajectory, canvas frame-rate cap (and the
+    Maps folder)."""
 
     canvas: viser.GuiDropdownHandle
     maps: viser.GuiDropdownHandle
+    trajectory: viser.GuiDropdownHandle
+    """The 3-D view's trajectory: TRAJECTORY_RAW or TRAJECTORY_SMOOTHED."""
     canvas_fps: viser.GuiSliderHandle
     maps_folder: viser.GuiFolderHandle
     """Holds one image per target while `maps` is MAPS_PANELS (see app/display.py)."""
@@ -184,6 +189,11 @@ def _display_panel(
             options=(MAPS_OFF, MAPS_RESPONSE, MAPS_VARIATION, MAPS_VARIATION_TARGET, MAPS_PANELS),
             initial_value=MAPS_RESPONSE,
         )
+        trajectory = gui.add_dropdown(
+            "3-D trajectory",
+            options=(TRAJECTORY_RAW, TRAJECTORY_SMOOTHED),
+            initial_value=TRAJECTORY_RAW,
+        )
         canvas_fps = gui.add_slider(
             "Canvas frames/s cap",
             min=1,
@@ -196,7 +206,7 @@ def _display_panel(
             "Choose *Display → Maps → panels (per target)* to show each target's maps here."
         )
         folder = gui.add_folder("Maps per target", visible=False)
-    return DisplayPanel(canvas, maps, canvas_fps, folder)
+    return DisplayPanel(canvas, maps, trajectory, canvas_fps, folder)
 
 
 @dataclass

@@ -120,6 +120,7 @@ class Tab:
         playback.frame.on_update(edit(lambda: submit(self.seek, int(playback.frame.value) - 1)))
         display.canvas.on_update(edit(lambda: submit(self.canvas_mode_changed)))
         display.maps.on_update(edit(lambda: submit(self.maps_changed)))
+        display.trajectory.on_update(edit(lambda: submit(self.display.wake)))
         display.canvas_fps.on_update(edit(self.display.wake))
         session.download_tracks.on_click(lambda _: submit(self.download, "tracks"))
         session.download_poses.on_click(lambda _: submit(self.download, "poses"))

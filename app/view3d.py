@@ -52,6 +52,8 @@ class SceneView:
         self._gt_positions: np.ndarray | None = None
         self.segments_sent = 0
         """Trajectory segments in the last update (a count the tests can check)."""
+        self.trajectory_drawn = np.zeros((0, 3))
+        """Positions of the trajectory drawn last (raw or smoothed, per the Display toggle)."""
         self.frustum_state = "none"
         """'valid', 'invalid' or 'none': how the current camera was drawn last."""
 
@@ -60,6 +62,7 @@ class SceneView:
         self.api.remove_by_name("/studio")
         self.scene = None
         self.segments_sent = 0
+        self.trajectory_drawn = np.zeros((0, 3))
         self.frustum_state = "none"
 
     def show_scene(self, scene: Scene | None, gt_positions: np.ndarray | None) -> None:
@@ -132,6 +135,7 @@ class SceneView:
             return
         segments = segments_with_gaps(view.trajectory_frames, view.trajectory_positions)
         self.segments_sent = len(segments)
+        self.trajectory_drawn = view.trajectory_positions
         if len(segments):
             self.api.add_line_segments(
                 "/studio/trajectory",

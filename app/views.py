@@ -7,14 +7,18 @@ without a browser.
 from __future__ import annotations
 
 from collections.abc import Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
 from app.canvas import TargetDrawing, target_colour
 from app.groundtruth import TruthView
+from autotrack.localization.smoothing import SmootherParams, smoothed_positions
 from autotrack.pipeline import Pipeline
 from autotrack.result import PoseEstimate, TrackResult
+
+DEFAULT_FPS = 10.0
+"""Frame rate the smoother assumes when the sequence has none."""
 
 
 @dataclass(frozen=True)
@@ -27,6 +31,21 @@ class PoseView:
     trajectory_frames: tuple[int, ...]
     trajectory_positions: np.ndarray
     """(n, 3) positions of the valid poses, in frame order."""
+    poses: Mapping[int, PoseEstimate]
+    """Every pose so far by frame (for the smoothed trajectory)."""
+    fps: float
+    """The sequence's frame rate (the smoother's time step)."""
+
+
+def smoothed_view(view: PoseView) -> PoseView:
+    """`view` with the smoothed trajectory (constant-velocity Kalman with a 3-frame fixed-lag
+    smoother) in place of the raw one; gaps stay gaps."""
+    smoothed = smoothed_positions(view.poses, SmootherParams(fps=view.fps))
+    return replace(
+        view,
+        trajectory_frames=tuple(index for index, _ in smoothed),
+        trajectory_positions=np.array([position for _, position in smoothed]).reshape(-1, 3),
+    )
 
 
 @dataclass(frozen=True)
@@ -165,6 +184,8 @@ def _pose_view(run: Pipeline, frame_index: int) -> PoseView | None:
         last_valid=last_valid,
         trajectory_frames=tuple(index for index, _ in trajectory),
         trajectory_positions=np.array([position for _, position in trajectory]).reshape(-1, 3),
+        poses=dict(run.poses),
+        fps=run.fps or DEFAULT_FPS,
     )
 
 

@@ -538,6 +538,27 @@ def test_playing_tracks_every_target_and_estimates_poses(studio) -> None:
     )
 
 
+def test_3d_view_switches_between_raw_and_smoothed_trajectories(studio) -> None:
+    tab, _ = _open_tab(studio)
+    _draw_demo_boxes(tab)
+    _set(tab.panels.playback.frame, 9)
+    assert tab.wait_idle()
+    view3d = tab.display.view3d
+    _wait_for(lambda: len(view3d.trajectory_drawn) == 9)
+    raw = np.array(view3d.trajectory_drawn)
+    np.testing.assert_allclose(raw[-1], tab.controller.run.poses[8].position)
+
+    _set(tab.panels.display.trajectory, "smoothed (0.3 s lag)")
+    assert tab.wait_idle()
+    _wait_for(lambda: not np.allclose(view3d.trajectory_drawn, raw))
+    smoothed = np.array(view3d.trajectory_drawn)
+    assert smoothed.shape == raw.shape and np.max(np.abs(smoothed - raw)) < 0.05
+
+    _set(tab.panels.display.trajectory, "raw poses")
+    assert tab.wait_idle()
+    _wait_for(lambda: np.allclose(view3d.trajectory_drawn, raw))
+
+
 def _tiles(run, target_id: str, frame_index: int) -> list[np.ndarray | None]:
     """What the 2 x 2 map panel shows, in its order: previous response, response, local
     variation, ASR weights."""

@@ -93,6 +93,18 @@ def _live_recording(args: argparse.Namespace, scene_path: Path) -> Any:
     )
 
 
+def _pose_options(args: argparse.Namespace) -> dict[str, Any]:
+    """The pipeline's refinement and re-acquisition settings from `--no-refine` and
+    `--no-reacquire`."""
+    from autotrack.localization.reacquire import ReacquireParams
+    from autotrack.localization.refine import RefineParams
+
+    return {
+        "refine_params": None if args.no_refine else RefineParams(),
+        "reacquire_params": None if args.no_reacquire else ReacquireParams(),
+    }
+
+
 def run_localize_live(
     args: argparse.Namespace,
     *,
@@ -126,6 +138,7 @@ def run_localize_live(
             recording=_live_recording(args, scene_path),
             fps=reader.fps or DEFAULT_FPS,
             threads=args.threads,
+            **_pose_options(args),
         )
         for _, outcome in outcomes:
             records.append(outcome)

@@ -101,9 +101,41 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument(
         "--force", action="store_true", help="replace existing --out and --tracks files"
     )
+    _add_pose_arguments(parser)
     parser.add_argument("--quiet", action="store_true", help="no progress bar")
     add_live_arguments(parser)
     parser.set_defaults(func=run_localize)
+
+
+def _add_pose_arguments(parser: argparse.ArgumentParser) -> None:
+    """--no-refine, --no-reacquire, --smoothed, --smooth-lag."""
+    parser.add_argument(
+        "--no-refine",
+        action="store_true",
+        help="use the trackers' box centres as image points (no sub-pixel template alignment)",
+    )
+    parser.add_argument(
+        "--no-reacquire",
+        action="store_true",
+        help="do not gate landmarks the pose puts out of view nor restart lost ones where the "
+        "pose predicts them",
+    )
+    parser.add_argument(
+        "--smoothed",
+        type=Path,
+        default=None,
+        metavar="FILE",
+        help="also write the smoothed trajectory (constant-velocity Kalman + fixed-lag RTS) "
+        "here (TUM); --out keeps the raw per-frame poses",
+    )
+    parser.add_argument(
+        "--smooth-lag",
+        type=int,
+        default=3,
+        metavar="N",
+        help="smoother lag in frames: the smoothed pose of a frame uses N later frames, a "
+        "latency of N / fps seconds (default 3; 0 = causal Kalman filter)",
+    )
 
 
 def _default_file(given: Path | None, sequence: Path | str, name: str, option: str) -> Path:
@@ -115,30 +147,44 @@ def _default_file(given: Path | None, sequence: Path | str, name: str, option: s
     raise InputError(f"give {option} (no {name} in {sequence})")
 
 
-def run_localize(args: argparse.Namespace) -> int:
-    from autotrack.io.frames import open_frames
-    from autotrack.io.tum import read_tum
-    from autotrack.localization.localizer import LocalizerParams
-    from autotrack.pipeline import Recording, localize_sequence
-
-    check_output_file(args.out, "--out", force=args.force)
-    check_output_file(args.tracks, "--tracks", force=args.force)
+def _check_arguments(args: argparse.Namespace) -> None:
+    """Outputs writable and not clobbered, numbers in range: before any work starts."""
+    for path, option in (
+        (args.out, "--out"),
+        (args.tracks, "--tracks"),
+        (args.smoothed, "--smoothed"),
+    ):
+        check_output_file(path, option, force=args.force)
     if args.session is not None and (args.session.exists() or args.session.is_symlink()):
         raise InputError(f"--session {args.session} exists; session files are never replaced")
     check_output_file(args.session, "--session", force=False)
     finite(args.fps, "--fps", low=0)
     finite(args.max_rms, "--max-rms", low=0)
+    if args.threads < 1:
+        raise InputError("--threads must be at least 1")
+    if not args.no_reacquire and args.no_refine:
+        raise InputError("re-acquisition needs the refiner's templates: add --no-reacquire")
+    if args.smooth_lag < 0:
+        raise InputError("--smooth-lag must be 0 or more")
+
+
+def run_localize(args: argparse.Namespace) -> int:
+    from autotrack.io.frames import open_frames
+    from autotrack.io.tum import read_tum
+    from autotrack.localization.localizer import LocalizerParams
+    from autotrack.localization.reacquire import ReacquireParams
+    from autotrack.localization.refine import RefineParams
+    from autotrack.localization.smoothing import SmootherParams
+    from autotrack.pipeline import Recording, localize_sequence
+
+    _check_arguments(args)
     scene_path = _default_file(args.scene, args.sequence, "scene.json", "--scene")
     scene = load_scene(scene_path)
     for warning in scene_warnings(scene):
         print(f"autotrack: warning: {warning}", file=sys.stderr)
     init = read_boxes_json(_default_file(args.init, args.sequence, "boxes.json", "--init"))
-    if args.threads < 1:
-        raise InputError("--threads must be at least 1")
     localizer_params = LocalizerParams()
     if args.max_rms is not None:
-        if args.max_rms <= 0:
-            raise InputError("--max-rms must be positive")
         localizer_params = replace(localizer_params, max_rms_error_px=args.max_rms)
     gt = None if args.gt is None else read_tum(args.gt)
     check_source(args)
@@ -156,6 +202,7 @@ def run_localize(args: argparse.Namespace) -> int:
     fps = args.fps or frames.fps or DEFAULT_FPS
     if fps <= 0:
         raise InputError("--fps must be positive")
+    smoother = SmootherParams(fps=fps, lag_frames=args.smooth_lag) if args.smoothed else None
     recording = None
     if args.session is not None:
         recording = Recording(source=str(args.sequence), path=args.session, scene_path=scene_path)
@@ -171,12 +218,16 @@ def run_localize(args: argparse.Namespace) -> int:
             recording=recording,
             fps=fps,
             threads=args.threads,
+            refine_params=None if args.no_refine else RefineParams(),
+            reacquire_params=None if args.no_reacquire else ReacquireParams(),
         )
         for outcome in outcomes:
             records.append(outcome)
             progress.update()
     timestamps = np.arange(len(records)) / fps
     report = summarise(records, timestamps, scene, args.out, args.tracks, gt, frames.name)
+    if args.smoothed is not None and smoother is not None:
+        report += "\n" + smoothed_report(records, timestamps, args.smoothed, smoother, gt)
     print(report)
     if not any(record.pose.valid for record in records):
         print(
@@ -228,16 +279,52 @@ def summarise(
     return "\n".join(lines)
 
 
+def smoothed_report(
+    records: Sequence[FrameOutcome],
+    timestamps: np.ndarray,
+    path: Path,
+    smoother: Any,
+    gt: tuple[np.ndarray, np.ndarray, np.ndarray] | None,
+) -> str:
+    """Write the smoothed trajectory (`smoother`: SmootherParams) to `path` (TUM) and return
+    its report lines (with its errors against `gt`)."""
+    from autotrack.io.tum import write_tum
+    from autotrack.localization.smoothing import samples_from_poses, smooth_poses
+    from autotrack.localization.trajectory import trajectory_errors
+
+    samples = list(smooth_poses(samples_from_poses([r.pose for r in records]), smoother))
+    positions = np.array([p.position for p in samples]).reshape(-1, 3)
+    quaternions = np.array([p.quaternion_xyzw for p in samples]).reshape(-1, 4)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    written = write_tum(path, timestamps, positions, quaternions)
+    lines = [
+        f"smoothed poses written to {path} ({written} rows, latency "
+        f"{smoother.lag_frames} frames = {smoother.latency_s:.2f} s)"
+    ]
+    if gt is not None:
+        errors = trajectory_errors(timestamps, positions, gt[0], gt[1])
+        lines.append(
+            f"smoothed: RMSE {errors.rmse_cm:.2f} cm, max {errors.max_error_cm:.2f} cm over "
+            f"{errors.frames} frames"
+        )
+    return "\n".join(lines)
+
+
 def _tracks_header(scene: Scene) -> list[str]:
     """Columns of --tracks: pose (NaN when invalid), validity, landmarks used and left out
     (why), reason when invalid, and per landmark its box, peak score, aberrance flag and
-    reprojection error."""
+    reprojection error; then per landmark the point given to the solver and whether it was
+    refined, and the frame's landmark events (out of view, re-acquired)."""
     header = ["frame", "timestamp", "valid", "tx", "ty", "tz", "qx", "qy", "qz", "qw"]
     header += ["rms_px", "position_std_m", "used", "excluded", "reason"]
     for landmark_id in scene.landmark_ids:
         header += [
             f"{landmark_id}_{k}" for k in ("x", "y", "w", "h", "peak", "aberrant", "error_px")
         ]
+    # The point given to the solver (refined or box centre) and what happened to the landmark.
+    for landmark_id in scene.landmark_ids:
+        header += [f"{landmark_id}_{k}" for k in ("u", "v", "refined")]
+    header.append("events")
     return header
 
 
@@ -261,4 +348,9 @@ def _tracks_rows(
                 row += [f"{v:.2f}" for v in track.box]
                 row += [f"{track.peak_score:.4f}", int(track.aberrant)]
             row.append(f"{pose.reprojection_errors.get(landmark_id, math.nan):.3f}")
+        points, refined = record.image_points, record.refined
+        for landmark_id in scene.landmark_ids:
+            u, v = points.get(landmark_id, (math.nan, math.nan))
+            row += [f"{u:.3f}", f"{v:.3f}", int(refined.get(landmark_id, False))]
+        row.append("; ".join(f"{k} {what}" for k, what in record.events.items()))
         yield row

@@ -109,17 +109,24 @@ class Localizer:
         self._prior = None
         self._peaks.clear()
 
+    def forget_landmark(self, landmark_id: str) -> None:
+        """Forget a landmark's peak-score history (its tracker was restarted)."""
+        self._peaks.pop(landmark_id, None)
+
     def estimate(
         self,
         frame_index: int,
         points: Mapping[str, tuple[float, float]],
         confidences: Mapping[str, float] | None = None,
         aberrant: Mapping[str, bool] | None = None,
+        landmark_weights: Mapping[str, float] | None = None,
     ) -> PoseEstimate:
         """Pose for one frame from landmark id -> image point (u, v), 0-based pixels.
 
-        `confidences` are tracker peak scores, `aberrant` the tracker's aberrance flags; both
-        optional. Unknown ids raise SceneError; missing or non-finite points count as lost.
+        `confidences` are tracker peak scores, `aberrant` the tracker's aberrance flags,
+        `landmark_weights` per-landmark weights in the refinement (default 1, multiplied with the
+        aberrant weight); all optional. Unknown ids raise SceneError; missing or non-finite
+        points count as lost.
         """
         params = self.params
         confidences = confidences or {}
@@ -145,6 +152,7 @@ class Localizer:
                 )
                 continue
             weight = params.aberrant_weight if aberrant.get(landmark_id, False) else 1.0
+            weight *= (landmark_weights or {}).get(landmark_id, 1.0)
             if weight <= 0.0:
                 excluded[landmark_id] = "aberrant"
                 continue

@@ -10,6 +10,7 @@ capture to the pipeline's result (tracking, pose and recording).
 from __future__ import annotations
 
 from collections.abc import Callable, Iterator, Sequence
+from typing import Any
 
 import numpy as np
 
@@ -41,11 +42,13 @@ def run_live(
     recording: Recording | None = None,
     fps: float | None = None,
     threads: int = 1,
+    **pose_options: Any,
 ) -> Iterator[tuple[CapturedFrame, FrameOutcome]]:
     """Each processed frame and its outcome, until the source ends.
 
     `start(pipeline, frame_index)` adds the targets on the first frame. `fps` is the frame
     rate of the recording's log times (default: the reader's). The reader must be started.
+    `pose_options` go to the Pipeline (refine_params, reacquire_params).
     """
     frames = LiveFrames(describe_source(log.reader.source), fps or log.reader.fps)
     pipeline: Pipeline | None = None
@@ -61,6 +64,7 @@ def run_live(
                     recording=recording,
                     fps=fps,
                     tracker_threads=threads,
+                    **pose_options,
                 )
                 start(pipeline, frame.index)
             else:

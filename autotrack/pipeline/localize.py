@@ -9,6 +9,8 @@ import numpy as np
 from autotrack.io.frames import FrameSource, InMemoryFrames
 from autotrack.localization.localizer import LocalizerParams
 from autotrack.localization.pnp import boxes_by_landmark
+from autotrack.localization.reacquire import ReacquireParams
+from autotrack.localization.refine import RefineParams
 from autotrack.localization.scene import Scene
 from autotrack.params import TrackerParams
 from autotrack.pipeline.pipeline import Pipeline
@@ -28,12 +30,18 @@ def localize_sequence(
     recording: Recording | None = None,
     fps: float | None = None,
     threads: int = 1,
+    refine_params: RefineParams | None = None,
+    reacquire_params: ReacquireParams | None = None,
 ) -> Iterator[FrameOutcome]:
     """Track every landmark and estimate the camera pose frame by frame.
 
     `frames` is a FrameSource or a list of RGB frames. `init_boxes` gives the first frame's
     boxes (x, y, w, h, 0-based pixels): landmark id -> box, or a list of boxes whose landmarks
     the correspondence search finds on the first frame (boxes.json's two forms).
+    `refine_params` turns on the sub-pixel refinement of the landmark points
+    (`localization.refine`), `reacquire_params` the out-of-view gate and re-acquisition of lost
+    landmarks (`localization.reacquire`; it uses the refiner's templates, so it turns refinement
+    on with default settings if needed).
     """
     if not isinstance(frames, FrameSource):
         frames = InMemoryFrames(list(frames), name="frames")
@@ -46,6 +54,8 @@ def localize_sequence(
         recording=recording,
         fps=fps,
         tracker_threads=threads,
+        refine_params=refine_params,
+        reacquire_params=reacquire_params,
     ) as pipeline:
         pipeline.add_targets(0, boxes)
         yield from pipeline.run()

@@ -23,17 +23,20 @@ import numpy as np
 
 from autotrack.errors import InputError
 from autotrack.io.frames import FrameCache, FrameSource
-from autotrack.localization.localizer import Localizer, LocalizerParams
+from autotrack.localization.localizer import LocalizerParams
+from autotrack.localization.reacquire import ReacquireParams
+from autotrack.localization.refine import RefineParams
 from autotrack.localization.scene import Scene
 from autotrack.params import TrackerParams
 from autotrack.pipeline.groups import TrackerGroups
+from autotrack.pipeline.posing import LandmarkEntry, PoseStage
 from autotrack.pipeline.recording import Recording, open_recorder
+from autotrack.pipeline.resume import restore
 from autotrack.pipeline.targets import (
     FrameOutcome,
     TrackedTarget,
     free_numbers,
     grown,
-    number_of,
 )
 from autotrack.result import PoseEstimate, TrackResult
 from autotrack.sessions import Session, SessionRecorder
@@ -56,6 +59,9 @@ class Pipeline:
         recording: Where to record the session (None: not recorded).
         fps: Frame rate of the log times (None: the frames' own, else the recorder's default).
         tracker_threads: Threads each MultiTracker may use for its targets.
+        refine_params: Sub-pixel landmark points (`localization.refine`; None: box centres).
+        reacquire_params: Out-of-view gate and re-acquisition of lost landmarks
+            (`localization.reacquire`; None: off). Both need a scene.
     """
 
     def __init__(
@@ -68,6 +74,8 @@ class Pipeline:
         recording: Recording | None = None,
         fps: float | None = None,
         tracker_threads: int = 1,
+        refine_params: RefineParams | None = None,
+        reacquire_params: ReacquireParams | None = None,
     ) -> None:
         if tracker_threads < 1:
             raise InputError(f"tracker threads must be at least 1, got {tracker_threads}")
@@ -87,8 +95,10 @@ class Pipeline:
         self.resume_frame = 0
         """After `resume`: the frame tracking continues from."""
         self._groups = TrackerGroups(params, tracker_threads)
-        self._localizer = (
-            None if scene is None else Localizer(scene, localizer_params or LocalizerParams())
+        self._posing = (
+            None
+            if scene is None
+            else PoseStage(scene, localizer_params, refine_params, reacquire_params)
         )
         self._last_pose_frame = -1
         self._frame_cache = FrameCache(frames, FRAME_CACHE)
@@ -106,13 +116,15 @@ class Pipeline:
         recording: Recording | None = None,
         fps: float | None = None,
         tracker_threads: int = 1,
+        **pose_options: Any,
     ) -> Pipeline:
         """Continue a recorded session on `frames` with its recorded tracker parameters.
 
         Its results and poses become this pipeline's history (copied into the new recording,
         which names the session as `resumed_from`), and each live target restarts from its
         last recorded box; `resume_frame` is the earliest restart. Filters are not stored in a
-        session, so a restarted target learns afresh from its last box.
+        session, so a restarted target learns afresh from its last box (and, with
+        `pose_options` refine_params, its template from that box).
         """
         pipeline = cls(
             frames,
@@ -122,9 +134,10 @@ class Pipeline:
             recording=recording,
             fps=fps,
             tracker_threads=tracker_threads,
+            **pose_options,
         )
         pipeline.resumed_from = session.path
-        pipeline._restore(session)
+        restore(pipeline, session)
         return pipeline
 
     # -- frames -------------------------------------------------------------------------------
@@ -262,6 +275,8 @@ class Pipeline:
             for index in sorted(target.results):
                 recorder.log_no_result(target_id, index, landmark_id=None)
         del self.targets[target_id]
+        if self._posing is not None:
+            self._posing.remove(target_id, target.landmark_id)
         self._forget_poses_from(first)
         self._log_event("box_deleted", frame_index, target_id)
         self._estimate_pose(frame_index)
@@ -272,6 +287,8 @@ class Pipeline:
         if target.landmark_id == landmark_id:
             return
         self._check_landmark(landmark_id, target_id)
+        if self._posing is not None:
+            self._posing.landmark_changed(target_id, target.landmark_id, landmark_id)
         target.landmark_id = landmark_id
         self._forget_poses_from(min(target.results, default=0))
         self._log_event("landmark_assigned", frame_index, target_id, landmark_id=landmark_id)
@@ -332,6 +349,9 @@ class Pipeline:
             self._embed_frame(frame_index)
             for target_id, result in results.items():
                 self._store(self.targets[target_id], result)
+            if self._posing is not None:
+                boxes = {k: r.box for k, r in results.items() if self.targets[k].landmark_id}
+                self._posing.refine(frame_index, self.frame(frame_index), boxes)
         self._estimate_pose(frame_index)
 
     def _grow(self) -> None:
@@ -375,12 +395,16 @@ class Pipeline:
             tracks=self.results_at(frame_index),
             landmark_ids={t.id: t.landmark_id for t in self.targets.values()},
             pose=self.poses.get(frame_index),
+            solver=None if self._posing is None else self._posing.solver_input(frame_index),
         )
 
     def _timed_start(self, frame_index: int, boxes: Mapping[str, Box]) -> dict[str, TrackResult]:
         frame = self.frame(frame_index)
         started = time.perf_counter()
         results = self._groups.start(frame_index, frame, boxes)
+        if self._posing is not None:
+            landmarks = {k: t.landmark_id for k, t in self.targets.items()}
+            self._posing.start(frame_index, frame, boxes, landmarks)
         elapsed = time.perf_counter() - started
         self.frame_seconds[frame_index] = np.nansum([self.frame_seconds[frame_index], elapsed])
         return results
@@ -397,6 +421,8 @@ class Pipeline:
                 recorder.log_no_result(target.id, later, landmark_id=target.landmark_id)
         for values in target.signals.values():
             values[frame_index:] = np.nan
+        if self._posing is not None:
+            self._posing.drop_points(target.id, frame_index + 1)
         self._store(target, result)
         self._forget_poses_from(frame_index)
         self._estimate_pose(frame_index)
@@ -418,41 +444,6 @@ class Pipeline:
         if recorder is not None:
             recorder.log_target(target.id, result, landmark_id=target.landmark_id)
 
-    def _restore(self, session: Session) -> None:
-        live = {
-            target_id: target
-            for target_id, target in session.recorded_targets().items()
-            if target.last_box is not None and 0 <= target.last_box[0] < self.frame_count
-        }
-        restarts: dict[int, dict[str, Box]] = {}
-        for target_id, recorded in live.items():
-            frame_index, box = recorded.last_box
-            restarts.setdefault(frame_index, {})[target_id] = box
-        resume_frame = min(restarts, default=0)
-        for position, (target_id, recorded) in enumerate(live.items()):
-            landmark = recorded.landmark_id
-            if self.scene is None or landmark not in self.scene.landmark_ids:
-                landmark = None
-            number = number_of(target_id, position + 1)
-            target = TrackedTarget.new(target_id, number, landmark, self.frame_count)
-            self.targets[target_id] = target
-            for frame_index, result in sorted(recorded.results.items()):
-                if frame_index <= recorded.last_box[0]:
-                    self._store(target, result)
-        for frame_index, pose in sorted(session.pose_estimates().items()):
-            if frame_index < resume_frame:
-                self.poses[frame_index] = pose
-                recorder = self._recorder_or_none()
-                if recorder is not None:
-                    recorder.log_pose(pose)
-        for frame_index, boxes in sorted(restarts.items()):
-            started = self._timed_start(frame_index, boxes)
-            for target_id, result in started.items():
-                target = self.targets[target_id]
-                self._restart(target, target.results.get(frame_index, result))
-        self.resume_frame = resume_frame
-        self._log_event("session_resumed", resume_frame, None, source=str(session.path))
-
     # -- localisation -------------------------------------------------------------------------
 
     def _forget_poses_from(self, first_stale: int) -> None:
@@ -463,34 +454,39 @@ class Pipeline:
             del self.poses[index]
             if recorder is not None:
                 recorder.log_no_pose(index, "discarded: a box was redrawn on an earlier frame")
-        if self._localizer is not None and self._last_pose_frame >= first_stale:
+        if self._posing is not None:
             # The localiser keeps the previous pose as a continuity prior: start it afresh.
-            self._localizer.reset()
-            self._last_pose_frame = -1
+            self._posing.forget_from(first_stale)
 
     def _estimate_pose(self, frame_index: int) -> None:
-        if self._localizer is None or frame_index in self.poses:
+        if self._posing is None or frame_index in self.poses:
             return
-        points: dict[str, tuple[float, float]] = {}
-        confidences: dict[str, float] = {}
-        aberrant: dict[str, bool] = {}
-        for target in self.targets.values():
-            result = target.results.get(frame_index)
-            if target.landmark_id is None or result is None:
-                continue
-            points[target.landmark_id] = result.center
-            confidences[target.landmark_id] = float(result.peak_score)
-            aberrant[target.landmark_id] = bool(result.aberrant)
-        if not points:
+        entries = [
+            LandmarkEntry(t.id, t.landmark_id, t.results[frame_index], t.last_frame == frame_index)
+            for t in self.targets.values()
+            if t.landmark_id is not None and frame_index in t.results
+        ]
+        if not entries:
             return
-        if self._last_pose_frame != self.frames.previous_index(frame_index):
-            self._localizer.reset()
-        pose = self._localizer.estimate(frame_index, points, confidences, aberrant)
-        self._last_pose_frame = frame_index
+        previous = self.frames.previous_index(frame_index)
+        pose = self._posing.estimate(frame_index, previous, entries)
         self.poses[frame_index] = pose
         recorder = self._recorder_or_none()
         if recorder is not None:
             recorder.log_pose(pose)
+        if not self._posing.reacquiring:
+            return
+        frame = self.frame(frame_index)
+        for restart in self._posing.reacquire(frame_index, frame, pose, entries):
+            # The tracker restarts from the found box; this frame keeps its tracked result.
+            self._groups.start(frame_index, frame, {restart.target_id: restart.box})
+            self._log_event(
+                "landmark_reacquired",
+                frame_index,
+                restart.target_id,
+                box=restart.box,
+                landmark_id=restart.landmark_id,
+            )
 
     def valid_positions(self) -> Iterator[tuple[int, np.ndarray]]:
         """(frame index, camera position) of the valid poses, in frame order."""

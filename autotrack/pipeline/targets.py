@@ -6,6 +6,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from autotrack.pipeline.posing import SolverInput
 from autotrack.result import PoseEstimate, TrackResult
 
 Box = tuple[float, float, float, float]
@@ -71,6 +72,8 @@ class FrameOutcome:
     """Target id -> the landmark it localises (None: tracked only)."""
     pose: PoseEstimate | None
     """Camera pose (None without a scene or landmark targets)."""
+    solver: SolverInput | None = None
+    """What the pose solver was given (None: no pose solved on this frame)."""
 
     @property
     def landmark_tracks(self) -> dict[str, TrackResult]:
@@ -82,9 +85,26 @@ class FrameOutcome:
         }
 
     @property
-    def image_points(self) -> dict[str, tuple[float, float]]:
-        """Landmark id -> box centre (the point given to the pose solver)."""
+    def box_centres(self) -> dict[str, tuple[float, float]]:
+        """Landmark id -> the tracker's box centre."""
         return {landmark: result.center for landmark, result in self.landmark_tracks.items()}
+
+    @property
+    def image_points(self) -> dict[str, tuple[float, float]]:
+        """Landmark id -> the point given to the pose solver: the box centre, or the refined
+        point when refinement is on and accepted (NaN when the out-of-view gate left it out)."""
+        return self.box_centres if self.solver is None else dict(self.solver.points)
+
+    @property
+    def refined(self) -> dict[str, bool]:
+        """Landmark id -> whether the refined point replaced the box centre on this frame."""
+        return {} if self.solver is None else dict(self.solver.refined)
+
+    @property
+    def events(self) -> dict[str, str]:
+        """Landmark id -> what happened to it beyond tracking ("out of view", "re-acquired at
+        (u, v), match m")."""
+        return {} if self.solver is None else dict(self.solver.events)
 
 
 def number_of(target_id: str, fallback: int) -> int:
