@@ -292,7 +292,10 @@ class AutoTrack:
         zf = self._features_spectrum(image)
         response = dcf.detection_response(self.filter_f, zf, self.grid_size)
         peak = dcf.newton_peak(response, p.newton_iterations)
-        if peak[2] > local_peak and self._is_confident(peak[2], response):
+        # Move only to a confident place that beats the local peak by as much as the gate
+        # discounts a usual peak: a look-alike no better than the target does not win.
+        dominant = peak[2] * p.confidence_gate > local_peak
+        if dominant and self._is_confident(peak[2], response):
             return zf, response, peak, self._search_box()
         self.position = saved
         return None

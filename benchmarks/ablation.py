@@ -118,8 +118,13 @@ def _paths(out: Path, folder: str, sequence) -> tuple[Path, Path]:
     return base.with_suffix(".txt"), base.with_suffix(".time.json")
 
 
-def run_all(sequences, table: dict[str, dict], out: Path, jobs: int) -> dict:
-    """{label: {sequence name: (boxes, times)}} for every variant and CSRT, resuming from `out`."""
+def run_all(
+    sequences, table: dict[str, dict], out: Path, jobs: int, resume_only: bool = False
+) -> dict:
+    """{label: {sequence name: (boxes, times)}} for every variant and CSRT, resuming from `out`.
+
+    With `resume_only`, nothing is run: variants missing any sequence are left out.
+    """
     folders = {label: slug(overrides) for label, overrides in table.items()}
     folders["csrt"] = "csrt"
     results: dict[str, dict] = {label: {} for label in folders}
@@ -134,7 +139,12 @@ def run_all(sequences, table: dict[str, dict], out: Path, jobs: int) -> dict:
                     results[label][sequence.name] = (boxes, times)
                     continue
             todo.append((label, folder, sequence))
-    todo.sort(key=lambda item: -len(item[2]))  # longest first balances the pool
+    if resume_only:
+        return {k: v for k, v in results.items() if len(v) == len(sequences)}
+    # The faithful preset and autotrack+ first, then the ablation rows, CSRT, and the
+    # sensitivity runs; within a variant the longest sequences first (balances the pool).
+    priority = [FAITHFUL, PLUS, *ABLATION, "csrt", *folders]
+    todo.sort(key=lambda item: (priority.index(item[0]), -len(item[2])))
     os.environ.update(SINGLE_THREAD_ENVIRONMENT)
     with ProcessPoolExecutor(max_workers=max(jobs, 1)) as pool:
         futures = {
@@ -194,7 +204,7 @@ def build_tables(sequences, results: dict, table: dict[str, dict]) -> str:
         "|---|---|---|---|---|---|---|",
     ]
     base_p, base_auc = _mean(faithful, names)
-    labels = [label for label in table if label == PLUS or label in ABLATION] + ["csrt"]
+    labels = [label for label in [*ABLATION, PLUS, "csrt"] if label in results and label in scores]
     for label in labels:
         p, a = _mean(scores[label], names)
         worse = sum(scores[label][n].auc < faithful[n].auc - 0.01 for n in names)
@@ -218,8 +228,14 @@ def build_tables(sequences, results: dict, table: dict[str, dict]) -> str:
         "",
     ]
     columns = [label for label in labels if label != "csrt"]
-    short = ["faithful", "+RV", "+RV+ASR", "+gate", "+gate+redet", "+scale", PLUS]
-    header = short[: len(columns)] if len(columns) == len(short) else columns
+    short = dict(
+        zip(
+            [*ABLATION, PLUS],
+            ["faithful", "+RV", "+RV+ASR", "+gate", "+gate+redet", "+scale", PLUS],
+            strict=True,
+        )
+    )
+    header = [short.get(c, c) for c in columns]
     lines.append("| sequence | " + " | ".join(header) + " | official | CSRT |")
     lines.append("|---|" + "---|" * (len(columns) + 2))
     for sequence in sequences:
@@ -230,7 +246,7 @@ def build_tables(sequences, results: dict, table: dict[str, dict]) -> str:
         )
         cells.append(f"{scores['csrt'][n].precision:.3f} / {scores['csrt'][n].auc:.3f}")
         lines.append(f"| {sequence.dataset}/{n} | " + " | ".join(cells) + " |")
-    sensitivity = [label for label in table if label.startswith(f"{PLUS} ")]
+    sensitivity = [label for label in results if label.startswith(f"{PLUS} ")]
     if sensitivity:
         plus_p, plus_a = _mean(scores[PLUS], names)
         lines += [
@@ -245,6 +261,9 @@ def build_tables(sequences, results: dict, table: dict[str, dict]) -> str:
             cells = []
             for factor in (0.5, 2.0):
                 label = f"{PLUS} {name} x{factor:g}"
+                if label not in scores:
+                    cells.append("not run")
+                    continue
                 p, a = _mean(scores[label], names)
                 cells.append(f"{p:.3f} / {a:.3f} ({p - plus_p:+.3f} / {a - plus_a:+.3f})")
             default = getattr(PRESETS[PLUS], name)
@@ -265,6 +284,9 @@ def main() -> None:
     parser.add_argument("--out", type=Path, default=REPO / "results" / "ablation")
     parser.add_argument("--jobs", type=int, default=2)
     parser.add_argument("--no-sensitivity", action="store_true", help="ablation only")
+    parser.add_argument(
+        "--resume-only", action="store_true", help="tabulate what is saved, run nothing"
+    )
     parser.add_argument("--only", default=None, help="comma-separated labels: run just these")
     parser.add_argument("--update-doc", action="store_true", help=f"rewrite the tables in {DOC}")
     args = parser.parse_args()
@@ -274,7 +296,7 @@ def main() -> None:
         wanted = args.only.split(",")
         run_all(sequences, {k: v for k, v in table.items() if k in wanted}, args.out, args.jobs)
         return
-    results = run_all(sequences, table, args.out, args.jobs)
+    results = run_all(sequences, table, args.out, args.jobs, args.resume_only)
     tables = build_tables(sequences, results, table)
     print(tables)
     if args.update_doc:

@@ -1,4 +1,4 @@
-"""Speed side by side: AutoTrack, STRCF, OpenCV CSRT and KCF on the dev sequences, one thread.
+"""Speed side by side: AutoTrack, STRCF, autotrack+, OpenCV CSRT and KCF on the dev sequences.
 
 Prints per tracker the median fps over sequences, the frame-weighted fps and the peak memory of
 its process (each tracker runs alone in a fresh process, the others waiting), the AutoTrack /
@@ -135,7 +135,7 @@ def guard(boxes_by_sequence: dict[str, np.ndarray]) -> bool:
 
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--trackers", default="autotrack,strcf,csrt,kcf")
+    parser.add_argument("--trackers", default="autotrack,strcf,autotrack+,csrt,kcf")
     parser.add_argument("--skip-multi", action="store_true")
     parser.add_argument("--multi-frames", type=int, default=80)
     parser.add_argument("--multi-threads", type=int, default=2)
@@ -164,8 +164,9 @@ def main() -> int:
             f"{tracker:<11}{medians[tracker]:>11.1f}{total_frames / total_seconds:>13.1f}"
             f"{result['peak_mb']:>9.0f}"
         )
-    if "autotrack" in medians and "csrt" in medians:
-        print(f"AutoTrack / CSRT median fps: {medians['autotrack'] / medians['csrt']:.2f}x")
+    for name in ("autotrack", "autotrack+"):
+        if name in medians and "csrt" in medians:
+            print(f"{name} / CSRT median fps: {medians[name] / medians['csrt']:.2f}x")
     print(
         "\nper sequence fps: "
         + ", ".join(

@@ -9,9 +9,12 @@ import numpy as np
 import pytest
 
 from autotrack import AutoTrack, dcf, preset, redetect, regularization, robust
-from autotrack.evaluation import center_errors, overlaps
+from autotrack.benchmark import run_task
+from autotrack.datasets import load_sequences
+from autotrack.evaluation import center_errors, overlaps, score_sequence, summarize
 from autotrack.params import PRESETS
 from autotrack.scale import ScaleFilter
+from tests.conftest import SEQUENCES, needs_sequences
 from tests.sequences import moving_target_sequence
 
 
@@ -110,7 +113,10 @@ def test_apce_of_a_single_peak_on_a_flat_floor():
 def test_confidence_is_calibrated_to_the_running_averages():
     confidence = robust.ResponseConfidence(memory=0.5)
     assert confidence.confidence(3.0, 40.0) == 1.0  # no reference yet
-    confidence.observe(2.0, 40.0, gate=0.7)
+    confidence.observe(1.0, 50.0, gate=0.7)
+    assert confidence.confidence(0.1, 1.0) == 1.0  # one frame is no calibration (1/memory = 2)
+    confidence.observe(3.0, 30.0, gate=0.7)  # calibrated: the mean of the first two frames
+    assert confidence.calibrated
     assert confidence.confidence(1.0, 40.0) == pytest.approx(0.5)  # half the usual peak
     assert confidence.confidence(2.0, 10.0) == pytest.approx(0.5)  # a quarter of the APCE
     confidence.observe(4.0, 40.0, gate=0.7)  # a confident frame: plain running average
@@ -210,3 +216,20 @@ def test_faithful_preset_has_every_new_switch_off():
     assert not faithful.beyond_release and faithful.name == "autotrack"
     assert PRESETS["autotrack+"].beyond_release and PRESETS["autotrack+"].name == "autotrack+"
     assert math.isclose(PRESETS["autotrack+"].confidence_gate, 0.7)
+
+
+@pytest.mark.slow
+@needs_sequences
+def test_plus_beats_the_faithful_preset_on_the_mean_over_the_dev_set():
+    # Means over all dev sequences, never single ones: the tracker is chaotic under rounding.
+    sequences = load_sequences(SEQUENCES)
+    assert len(sequences) >= 18
+    means = {}
+    for name in ("autotrack", "autotrack+"):
+        scores = [
+            score_sequence(s.name, run_task(name, s).boxes, s.ground_truth) for s in sequences
+        ]
+        means[name] = summarize(scores)
+    faithful, plus = means["autotrack"], means["autotrack+"]
+    assert plus.precision >= faithful.precision + 0.02
+    assert plus.auc >= faithful.auc + 0.01
