@@ -51,11 +51,11 @@ ABLATION: dict[str, dict] = {
 bounded variation, re-detection needs the gate), as Table 2 adds ASR and ATR to STRCF."""
 
 SENSITIVE = (
+    "confidence_gate",
+    "redetect_span",
+    "confidence_memory",
     "delta",
     "variation_floor",
-    "confidence_gate",
-    "confidence_memory",
-    "redetect_span",
     "scale_model_min_side",
 )
 """The parameters `autotrack+` uses or adds (delta is the release's, but it acts only here)."""
@@ -71,10 +71,15 @@ def plus_overrides() -> dict:
     }
 
 
+WITHOUT_ASR = f"{PLUS} without acting ASR"
+"""Leave-one-out of the change whose effect on the mean is smallest and least certain."""
+
+
 def variants(sensitivity: bool) -> dict[str, dict]:
     """Variant label -> parameter overrides of the faithful preset."""
     table = dict(ABLATION)
     table[PLUS] = plus_overrides()
+    table[WITHOUT_ASR] = {**plus_overrides(), "acting_asr": False}
     if sensitivity:
         for name in SENSITIVE:
             value = getattr(PRESETS[PLUS], name)
@@ -143,7 +148,7 @@ def run_all(
         return {k: v for k, v in results.items() if len(v) == len(sequences)}
     # The faithful preset and autotrack+ first, then the ablation rows, CSRT, and the
     # sensitivity runs; within a variant the longest sequences first (balances the pool).
-    priority = [FAITHFUL, PLUS, *ABLATION, "csrt", *folders]
+    priority = [FAITHFUL, PLUS, *ABLATION, WITHOUT_ASR, "csrt", *folders]
     todo.sort(key=lambda item: (priority.index(item[0]), -len(item[2])))
     os.environ.update(SINGLE_THREAD_ENVIRONMENT)
     with ProcessPoolExecutor(max_workers=max(jobs, 1)) as pool:
@@ -230,8 +235,8 @@ def build_tables(sequences, results: dict, table: dict[str, dict]) -> str:
     columns = [label for label in labels if label != "csrt"]
     short = dict(
         zip(
-            [*ABLATION, PLUS],
-            ["faithful", "+RV", "+RV+ASR", "+gate", "+gate+redet", "+scale", PLUS],
+            [*ABLATION, PLUS, WITHOUT_ASR],
+            ["faithful", "+RV", "+RV+ASR", "+gate", "+gate+redet", "+scale", PLUS, "+ no ASR"],
             strict=True,
         )
     )

@@ -231,9 +231,9 @@ def test_shared_data_root_of_otb_style_datasets():
         pytest.skip("shared data not available")
     assert detect_layout(SHARED) == "collection"
     sequences = load_sequences(SHARED)
-    assert len(sequences) == 12
+    assert len(sequences) == 18  # the dev set (../shared/data/README.md)
     names = [s.name for s in sequences]
-    assert len(set(names)) == 12 and "boat5" in names and "bag" in names
+    assert len(set(names)) == 18 and "boat5" in names and "group2_2" in names
     boat = next(s for s in sequences if s.name == "boat5")
     assert boat.dataset == "UAV123_10fps" and len(boat) == 169
     np.testing.assert_array_equal(boat.ground_truth[0], [540, 295, 188, 130])  # file: 541,296
