@@ -138,7 +138,7 @@ def run_all(
         for sequence in sequences:
             boxes_path, time_path = _paths(out, folder, sequence)
             if boxes_path.is_file() and time_path.is_file():
-                boxes = read_boxes(boxes_path) - np.array([1.0, 1.0, 0.0, 0.0])
+                boxes = read_boxes(boxes_path)
                 times = np.array(json.loads(time_path.read_text()))
                 if len(boxes) == len(sequence):
                     results[label][sequence.name] = (boxes, times)
@@ -163,7 +163,7 @@ def run_all(
             boxes, times = future.result()
             boxes_path, time_path = _paths(out, folder, sequence)
             boxes_path.parent.mkdir(parents=True, exist_ok=True)
-            write_boxes(boxes_path, boxes + np.array([1.0, 1.0, 0.0, 0.0]))
+            write_boxes(boxes_path, boxes)  # 1-based in the file, as toolkits read it
             time_path.write_text(json.dumps([round(float(t), 6) for t in times]))
             results[label][sequence.name] = (boxes, times)
             print(f"[{count}/{len(todo)}] {label} {sequence.name}", flush=True)
@@ -179,7 +179,7 @@ def _official(sequences) -> dict:
     for sequence in sequences:
         path = OFFICIAL / sequence.dataset / f"{sequence.name}.txt"
         if path.is_file():
-            boxes = read_boxes(path)[: len(sequence)] - np.array([1.0, 1.0, 0.0, 0.0])
+            boxes = read_boxes(path)[: len(sequence)]
             scores[sequence.name] = score_sequence(sequence.name, boxes, sequence.ground_truth)
     return scores
 
@@ -209,7 +209,8 @@ def build_tables(sequences, results: dict, table: dict[str, dict]) -> str:
         "|---|---|---|---|---|---|---|",
     ]
     base_p, base_auc = _mean(faithful, names)
-    labels = [label for label in [*ABLATION, PLUS, "csrt"] if label in results and label in scores]
+    order = [*ABLATION, PLUS, WITHOUT_ASR, "csrt"]
+    labels = [label for label in order if label in results]
     for label in labels:
         p, a = _mean(scores[label], names)
         worse = sum(scores[label][n].auc < faithful[n].auc - 0.01 for n in names)
@@ -251,7 +252,7 @@ def build_tables(sequences, results: dict, table: dict[str, dict]) -> str:
         )
         cells.append(f"{scores['csrt'][n].precision:.3f} / {scores['csrt'][n].auc:.3f}")
         lines.append(f"| {sequence.dataset}/{n} | " + " | ".join(cells) + " |")
-    sensitivity = [label for label in results if label.startswith(f"{PLUS} ")]
+    sensitivity = [label for label in results if label.startswith(f"{PLUS} ") and " x" in label]
     if sensitivity:
         plus_p, plus_a = _mean(scores[PLUS], names)
         lines += [
