@@ -108,12 +108,22 @@ class ResponseConfidence:
         self.memory = memory
         self.peak_reference: float | None = None
         self.apce_reference: float | None = None
+        self.frames_seen = 0
+
+    @property
+    def calibrated(self) -> bool:
+        """Whether the averages span their own memory (1 / memory frames) yet."""
+        return self.frames_seen * self.memory >= 1.0
 
     def confidence(self, peak: float, sharpness: float) -> float:
-        """min(peak / peak_ref, sqrt(APCE / APCE_ref)); 1 before any reference, 0 if not finite."""
+        """min(peak / peak_ref, sqrt(APCE / APCE_ref)); 0 if not finite, 1 until calibrated.
+
+        Until the averages have seen 1 / memory frames they are a guess (one frame sets them),
+        so every frame counts as confident and is learnt, as in the release.
+        """
         if not (math.isfinite(peak) and math.isfinite(sharpness)):
             return 0.0
-        if not self.peak_reference or not self.apce_reference:
+        if not self.calibrated or not self.peak_reference or not self.apce_reference:
             return 1.0
         return min(peak / self.peak_reference, math.sqrt(max(sharpness, 0.0) / self.apce_reference))
 
@@ -128,8 +138,13 @@ class ResponseConfidence:
         """
         if not (math.isfinite(peak) and math.isfinite(sharpness)):
             return
+        self.frames_seen += 1
         if not self.peak_reference or not self.apce_reference:
             self.peak_reference, self.apce_reference = peak, sharpness
+            return
+        if not self.calibrated:  # plain mean of the first frames
+            self.peak_reference += (peak - self.peak_reference) / self.frames_seen
+            self.apce_reference += (sharpness - self.apce_reference) / self.frames_seen
             return
         rate = self.memory
         peak_target = max(peak, gate * self.peak_reference)
