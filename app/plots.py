@@ -9,12 +9,13 @@ global-variation charts.
 
 from __future__ import annotations
 
-from collections.abc import Mapping, Sequence
-from dataclasses import dataclass
+from collections.abc import Sequence
 
 import numpy as np
 import viser
 import viser.uplot
+
+from app.views import SignalHistory
 
 ABERRANT_COLOUR = "#e03131"
 
@@ -44,24 +45,6 @@ def y_range(
     low, high = low - 0.1 * span, high + 0.1 * span
     step = 10.0 ** np.floor(np.log10(span)) / 10.0
     return (float(np.floor(low / step) * step), float(np.ceil(high / step) * step))
-
-
-@dataclass(frozen=True)
-class SignalHistory:
-    """Copies of the per-frame signals, taken by the tracking thread for the display thread."""
-
-    target_ids: tuple[str, ...]
-    colours: tuple[tuple[int, int, int], ...]
-    signals: Mapping[str, Mapping[str, np.ndarray]]
-    """Target id -> signal name (see app.run.SIGNAL_NAMES) -> values over all frames."""
-    frame_seconds: np.ndarray
-    """Tracking time per frame (s), NaN where nothing was tracked."""
-    phi: float
-    """Aberrance threshold on the global variation."""
-    last_frame: int
-    """Last frame with any value (-1: nothing yet)."""
-    frame_count: int
-    """Frames in the sequence (the x axis spans them all)."""
 
 
 def _css(colour: tuple[int, int, int]) -> str:

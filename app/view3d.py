@@ -8,14 +8,13 @@ without the frame thumbnail, and the trajectory line has a gap there.
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import dataclass
 
 import numpy as np
 import viser
 from scipy.spatial.transform import Rotation
 
-from autotrack.localize import PoseEstimate
-from autotrack.scene import Scene
+from app.views import PoseView
+from autotrack.localization.scene import Scene
 
 VALID_COLOUR = (40, 180, 60)
 INVALID_COLOUR = (220, 40, 40)
@@ -38,18 +37,6 @@ def segments_with_gaps(frames: Sequence[int], positions: np.ndarray) -> np.ndarr
     starts = positions[:-1][joined]
     ends = positions[1:][joined]
     return np.stack([starts, ends], axis=1)
-
-
-@dataclass(frozen=True)
-class PoseView:
-    """What the 3-D view shows for one frame."""
-
-    frame_index: int
-    pose: PoseEstimate | None
-    last_valid: PoseEstimate | None
-    trajectory_frames: tuple[int, ...]
-    trajectory_positions: np.ndarray
-    """(n, 3) positions of the valid poses, in frame order."""
 
 
 class SceneView:

@@ -4,23 +4,45 @@
 >>> tracker = AutoTrack(preset("autotrack"))
 >>> result = tracker.init(first_frame_rgb, (x, y, w, h))   # doctest: +SKIP
 >>> result = tracker.update(next_frame_rgb)                 # doctest: +SKIP
+
+The layout (tracker/, localization/, sessions/, evaluation/, synthetic/, io/, pipeline/) is
+described in docs/architecture.md.
 """
 
+from importlib import import_module
 from importlib.metadata import PackageNotFoundError, version
 
+from autotrack.compile_cache import configure_numba_cache
 from autotrack.errors import AutoTrackError, BoxError, InputError, SceneError, SessionError
 from autotrack.params import PRESETS, TrackerParams, preset
-from autotrack.result import TrackResult
+from autotrack.result import PoseEstimate, TrackResult
+
+# Loaded on first use: the tracker pulls in numba-compiled features, the localiser OpenCV and
+# SciPy, sessions MCAP; `import autotrack` and its light modules stay quick to import.
+_LAZY = {
+    "AutoTrack": "autotrack.tracker.tracker",
+    "CvAutoTrack": "autotrack.tracker.tracker",
+    "MultiTracker": "autotrack.tracker.multi",
+    "Localizer": "autotrack.localization.localizer",
+    "LocalizerParams": "autotrack.localization.localizer",
+    "Scene": "autotrack.localization.scene",
+    "load_scene": "autotrack.localization.scene",
+    "SessionRecorder": "autotrack.sessions.recorder",
+    "open_session": "autotrack.sessions.reader",
+    "Pipeline": "autotrack.pipeline.pipeline",
+    "Recording": "autotrack.pipeline.recording",
+    "localize_sequence": "autotrack.pipeline.localize",
+    "open_frames": "autotrack.io.frames",
+}
+
+configure_numba_cache()  # before numba is imported: compiled kernels need a writable cache
 
 
 def __getattr__(name: str):
-    # The tracker pulls in numba-compiled features: import it on first use only, so that
-    # `autotrack.frames`, `autotrack.evaluation` etc. stay light to import.
-    if name in ("AutoTrack", "CvAutoTrack"):
-        from autotrack import tracker
-
-        return getattr(tracker, name)
-    raise AttributeError(f"module 'autotrack' has no attribute {name!r}")
+    module = _LAZY.get(name)
+    if module is None:
+        raise AttributeError(f"module 'autotrack' has no attribute {name!r}")
+    return getattr(import_module(module), name)
 
 
 try:
@@ -35,10 +57,22 @@ __all__ = [
     "BoxError",
     "CvAutoTrack",
     "InputError",
+    "Localizer",
+    "LocalizerParams",
+    "MultiTracker",
+    "Pipeline",
+    "PoseEstimate",
+    "Recording",
+    "Scene",
     "SceneError",
     "SessionError",
+    "SessionRecorder",
     "TrackResult",
     "TrackerParams",
     "__version__",
+    "load_scene",
+    "localize_sequence",
+    "open_frames",
+    "open_session",
     "preset",
 ]

@@ -1,8 +1,11 @@
-"""What the tracker reports for each frame: the box and the signals inside the filter."""
+"""What the pipeline reports for each frame: a target's box and the signals inside its filter
+(`TrackResult`), and the camera pose with the reason when there is none to trust
+(`PoseEstimate`)."""
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+import math
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -48,3 +51,38 @@ class TrackResult:
     def box_array(self) -> np.ndarray:
         """The box as a float64 array [x, y, w, h]."""
         return np.asarray(self.box, dtype=np.float64)
+
+
+@dataclass(frozen=True)
+class PoseEstimate:
+    """Camera pose of one frame, or the reason there is none to trust."""
+
+    frame_index: int
+    """0-based index of the frame."""
+    valid: bool
+    """True when the pose passed every check; False poses carry NaN rotation and position."""
+    rotation: np.ndarray
+    """Camera-to-world rotation (3x3): columns are the camera axes in world coordinates."""
+    position: np.ndarray
+    """Camera centre in world coordinates (3,), metres."""
+    reprojection_errors: dict[str, float]
+    """Distance (px) between each landmark's reprojection and its box centre, NaN if unused."""
+    used_landmarks: tuple[str, ...]
+    """Landmarks the pose was solved from."""
+    reason: str = ""
+    """Empty when valid, else why the frame is not trusted."""
+    rms_error_px: float = math.nan
+    """RMS reprojection error over the landmarks used (px)."""
+    position_std_m: float = math.nan
+    """Predicted 1-sigma uncertainty of the camera position (metres, all axes together)."""
+    excluded_landmarks: dict[str, str] = field(default_factory=dict)
+    """Landmarks left out of the solve and why (lost, low peak score, aberrant, outlier)."""
+
+    def quaternion_xyzw(self) -> np.ndarray:
+        """The rotation as a unit quaternion (qx, qy, qz, qw), TUM order; NaN when invalid."""
+        if not np.all(np.isfinite(self.rotation)):
+            return np.full(4, np.nan)
+        # scipy's rotations load on first use: `import autotrack` stays light.
+        from scipy.spatial.transform import Rotation
+
+        return Rotation.from_matrix(self.rotation).as_quat(canonical=True)

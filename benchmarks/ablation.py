@@ -21,11 +21,12 @@ from pathlib import Path
 
 import numpy as np
 
-from autotrack.benchmark import SINGLE_THREAD_ENVIRONMENT, run_task, single_thread
-from autotrack.datasets import load_sequences, read_boxes, write_boxes
-from autotrack.evaluation import score_sequence
+from autotrack.evaluation.benchmark import SINGLE_THREAD_ENVIRONMENT, run_task, single_thread
+from autotrack.evaluation.datasets import load_sequences
+from autotrack.evaluation.metrics import score_sequence
+from autotrack.io.otb_boxes import read_boxes, write_boxes
 from autotrack.params import PRESETS
-from autotrack.tracker import AutoTrack
+from autotrack.tracker.tracker import AutoTrack
 
 REPO = Path(__file__).resolve().parents[1]
 SHARED = REPO / ".." / "shared" / "data"

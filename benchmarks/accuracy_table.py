@@ -17,15 +17,16 @@ import os
 import platform
 from pathlib import Path
 
-from autotrack.benchmark import (
+from autotrack.evaluation.benchmark import (
     run_benchmark,
     summarize_run,
     summary_json,
     write_run_plots,
 )
-from autotrack.datasets import load_sequences, read_boxes
-from autotrack.evaluation import SequenceScore, score_sequence, summarize
-from autotrack.peers import TRACKER_NAMES
+from autotrack.evaluation.datasets import load_sequences
+from autotrack.evaluation.metrics import SequenceScore, score_sequence, summarize
+from autotrack.evaluation.peers import TRACKER_NAMES
+from autotrack.io.otb_boxes import read_boxes
 
 REPO = Path(__file__).resolve().parents[1]
 SHARED = REPO / ".." / "shared" / "data"

@@ -24,27 +24,17 @@ from pathlib import Path
 
 import numpy as np
 
-from autotrack.frames import open_frames
-from autotrack.localize import (
-    Localizer,
-    LocalizerParams,
-    TrajectoryErrors,
-    box_centre,
-    format_table3,
-    localize_sequence,
-    read_tum,
-    trajectory_errors,
-    write_tum,
-)
+from autotrack.io.frames import open_frames
+from autotrack.io.tum import read_tum, write_tum
+from autotrack.localization.localizer import Localizer, LocalizerParams
+from autotrack.localization.pnp import box_centre
+from autotrack.localization.scene import load_scene
+from autotrack.localization.trajectory import TrajectoryErrors, format_table3, trajectory_errors
 from autotrack.params import PRESETS, preset
-from autotrack.scene import load_scene
-from autotrack.synthetic import (
-    RenderSettings,
-    SequenceSpec,
-    read_ground_truth_boxes,
-    render_sequence,
-    sequence_specs,
-)
+from autotrack.pipeline import localize_sequence
+from autotrack.synthetic.renderer import render_sequence
+from autotrack.synthetic.testbed import read_ground_truth_boxes, sequence_specs
+from autotrack.synthetic.trajectories import RenderSettings, SequenceSpec
 
 LARGE_ERROR_CM = 20.0
 PAPER_RMSE_CM = 3.44

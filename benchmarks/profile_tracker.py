@@ -14,8 +14,8 @@ from pathlib import Path
 import cv2
 
 from autotrack import AutoTrack, preset
-from autotrack.datasets import load_otb_sequence
-from autotrack.frames import read_image
+from autotrack.evaluation.datasets import load_otb_sequence
+from autotrack.io.frames import read_image
 
 
 def main() -> None:

@@ -13,11 +13,10 @@ import json
 import tempfile
 from pathlib import Path
 
-from autotrack.frames import open_frames
-from autotrack.localize import localize_sequence
+from autotrack.io.frames import open_frames
+from autotrack.localization.scene import load_scene
 from autotrack.params import preset
-from autotrack.scene import load_scene
-from autotrack.sessions import SessionRecorder
+from autotrack.pipeline import Recording, localize_sequence
 
 DEMO = Path(__file__).resolve().parents[1] / "static" / "demo"
 
@@ -26,25 +25,12 @@ def record(path: Path, **options: bool) -> int:
     """Record the demo's localisation run to `path`; returns the frame count."""
     scene = load_scene(DEMO / "scene.json")
     boxes = json.loads((DEMO / "boxes.json").read_text())
-    frames = open_frames(DEMO)
-    images = [frames.read(i) for i in range(len(frames))]
-    params = preset("autotrack")
-    with SessionRecorder(
-        path,
-        source=str(DEMO),
-        tracker_params=params,
-        scene_path=DEMO / "scene.json",
-        fps=10.0,
-        **options,
-    ) as recorder:
-        recorder.log_landmarks(scene)
-        for record in localize_sequence(images, scene, boxes, params):
-            if options.get("embed_frames"):
-                recorder.log_frame(record.frame_index, images[record.frame_index])
-            for landmark_id, track in record.tracks.items():
-                recorder.log_target(landmark_id, track, landmark_id=landmark_id)
-            recorder.log_pose(record.pose)
-    return len(images)
+    recording = Recording(source=str(DEMO), path=path, scene_path=DEMO / "scene.json", **options)
+    with open_frames(DEMO) as frames:
+        outcomes = localize_sequence(
+            frames, scene, boxes, preset("autotrack"), recording=recording, fps=10.0
+        )
+        return sum(1 for _ in outcomes)
 
 
 def main() -> None:

@@ -1,25 +1,34 @@
-"""Speed side by side: AutoTrack, STRCF, autotrack+, OpenCV CSRT and KCF on the dev sequences.
+"""Speed: AutoTrack against OpenCV CSRT in the same run, four targets + pose, start-up, guard.
 
-Prints per tracker the median fps over sequences, the frame-weighted fps and the peak memory of
-its process (each tracker runs alone in a fresh process, the others waiting), the AutoTrack /
-CSRT ratio, the per-frame time of four AutoTrack targets plus the pose step on 1280x720 frames,
-and the regression guard: AutoTrack's boxes (published Color Names table) against the
-pre-optimisation boxes kept in benchmarks/reference_boxes/ (0.5 px tolerance). Exit status 1
-when the guard fails.
+Prints
+1. single target, one thread: AutoTrack (published Color Names table) and OpenCV CSRT (plus any
+   other `--trackers`) interleaved on the twelve guarded dev sequences -- for every sequence and
+   repeat each tracker runs once, in rotating order, in this one single-thread process, so a
+   busy machine slows them alike -- with per tracker the median over sequences of each
+   sequence's median fps, and the AutoTrack / CSRT ratio (median over sequences of the
+   per-sequence ratio); tracking time only, frames decoded beforehand;
+2. four AutoTrack targets + the pose on a rendered 300-frame 1280x720 sequence, end to end from
+   the JPEG files (decoding and colour conversion included), on one thread and on two (two
+   threads: targets shared between two workers, the next frame decoded meanwhile);
+3. start-up: the time from launching a fresh Python process to its first tracked frame, for a
+   first process with an empty kernel cache and a second one that finds it filled;
+4. the regression guard: AutoTrack's boxes against the pre-optimisation boxes kept in
+   benchmarks/reference_boxes/ (exit status 1 when it fails).
 
-    python benchmarks/speed.py                 # everything
-    python benchmarks/speed.py --skip-multi    # trackers and guard only
+    python benchmarks/speed.py                       # everything (about 10 min on 2 idle cores)
+    python benchmarks/speed.py --skip-multi --skip-startup
+    python benchmarks/speed.py --repeats 1 --max-frames 60 --skip-guard   # a quick look
 """
 
 from __future__ import annotations
 
 import argparse
+import json
 import os
-import resource
+import subprocess
 import sys
 import tempfile
 import time
-from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 
 import numpy as np
@@ -29,55 +38,134 @@ SHARED = ROOT / ".." / "shared" / "data"
 COLOUR_TABLE = SHARED / "color_names" / "cn_norm_32768x10.npy"
 REFERENCE = ROOT / "benchmarks" / "reference_boxes"
 TOLERANCE_PX = 0.5
+MULTI_SEED = 3
+
+for _name in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS", "NUMBA_NUM_THREADS"):
+    os.environ.setdefault(_name, "1")
 
 
-def _single_thread_env() -> None:
-    for name in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS", "NUMBA_NUM_THREADS"):
-        os.environ[name] = "1"
+def guarded_sequences(max_frames: int | None):
+    """The dev sequences with kept reference boxes, optionally cut to their first frames."""
+    from dataclasses import replace
+
+    from autotrack.evaluation.datasets import load_sequences
+
+    kept = {path.stem for path in REFERENCE.glob("*/*.txt")}
+    sequences = [s for s in load_sequences(SHARED / "sequences") if s.name in kept]
+    if max_frames:
+        sequences = [
+            replace(
+                s,
+                frame_paths=s.frame_paths[:max_frames],
+                ground_truth=s.ground_truth[:max_frames],
+            )
+            for s in sequences
+        ]
+    return sequences
 
 
-def run_tracker(tracker: str, colour_table: str | None) -> dict:
-    """All dev sequences with one tracker, in this (fresh) process."""
-    from autotrack.benchmark import run_task
-    from autotrack.datasets import load_sequences
+def single_target(trackers: list[str], repeats: int, max_frames: int | None) -> dict:
+    """{tracker: {sequence: [fps per repeat]}} and AutoTrack's boxes of the first repeat."""
+    from autotrack.evaluation.benchmark import run_task
 
-    per_sequence = {}
-    for sequence in load_sequences(SHARED / "sequences"):
-        result = run_task(tracker, sequence, colour_table)
-        per_sequence[sequence.name] = (result.frames, result.seconds, result.boxes)
-    peak_kib = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
-    return {"sequences": per_sequence, "peak_mb": peak_kib / 1024.0}
+    fps: dict[str, dict[str, list[float]]] = {t: {} for t in trackers}
+    boxes = {}
+    for sequence in guarded_sequences(max_frames):
+        for repeat in range(repeats):
+            order = trackers[repeat % len(trackers) :] + trackers[: repeat % len(trackers)]
+            for tracker in order:
+                table = str(COLOUR_TABLE) if tracker in ("autotrack", "strcf") else None
+                result = run_task(tracker, sequence, table)
+                fps[tracker].setdefault(sequence.name, []).append(result.fps)
+                if tracker == "autotrack" and repeat == 0:
+                    boxes[sequence.name] = result.boxes
+        line = ", ".join(f"{t} {np.median(fps[t][sequence.name]):.0f}" for t in trackers)
+        print(f"  {sequence.name:<14} fps: {line}", flush=True)
+    return {"fps": fps, "boxes": boxes}
 
 
-def _in_fresh_process(tracker: str, colour_table: str | None) -> dict:
-    with ProcessPoolExecutor(max_workers=1, initializer=_single_thread_env) as pool:
-        return pool.submit(run_tracker, tracker, colour_table).result()
+def print_single_target(result: dict) -> None:
+    fps = result["fps"]
+    print(f"\n{'tracker':<11}{'median fps':>11}   (one thread, tracking time only, same run)")
+    medians = {}
+    for tracker, per_sequence in fps.items():
+        medians[tracker] = float(np.median([np.median(v) for v in per_sequence.values()]))
+        print(f"{tracker:<11}{medians[tracker]:>11.1f}")
+    if "autotrack" in fps and "csrt" in fps:
+        ratios = [
+            np.median(fps["autotrack"][name]) / np.median(fps["csrt"][name])
+            for name in fps["autotrack"]
+        ]
+        print(
+            f"AutoTrack / CSRT: {np.median(ratios):.2f}x (median of per-sequence ratios; "
+            f"range {min(ratios):.2f}-{max(ratios):.2f}; ratio of medians "
+            f"{medians['autotrack'] / medians['csrt']:.2f}x)"
+        )
 
 
-def multi_target_pose(frames_count: int, threads: int) -> tuple[float, int, float]:
-    """Seconds per frame of four AutoTrack targets + the pose step on rendered 1280x720 frames."""
-    from autotrack.frames import open_frames
-    from autotrack.localize import localize_sequence
+def render_multi_sequence(folder: Path, frames: int) -> Path:
+    from autotrack.synthetic.renderer import render_sequence
+    from autotrack.synthetic.testbed import sequence_specs
+
+    spec = sequence_specs(1, frames=frames, seed=MULTI_SEED)[0]
+    return render_sequence(folder / spec.name, spec)
+
+
+def multi_target_pose(sequence: Path, threads: int) -> dict:
+    """Four targets + pose from the JPEG files: seconds per frame, decoding included."""
+    import cv2
+
+    from autotrack.io.frames import open_frames
+    from autotrack.localization.scene import load_scene
     from autotrack.params import preset
-    from autotrack.scene import load_scene
-    from autotrack.synthetic import render_sequence, sequence_specs
+    from autotrack.pipeline import localize_sequence
 
-    spec = sequence_specs(1, frames=frames_count, seed=3)[0]
-    with tempfile.TemporaryDirectory() as folder:
-        out = render_sequence(Path(folder) / spec.name, spec)
-        source = open_frames(out)
-        frames = [source.read(i) for i in range(len(source))]
-        scene = load_scene(out / "scene.json")
-        import json
+    cv2.setNumThreads(1)
+    scene = load_scene(sequence / "scene.json")
+    boxes = json.loads((sequence / "boxes.json").read_text())
+    with open_frames(sequence) as source:  # warm-up: kernels loaded, files in the page cache
+        list(
+            localize_sequence([source.read(i) for i in range(3)], scene, boxes, preset("autotrack"))
+        )
+        for index in range(len(source)):
+            source.read_bgr(index)
+    with open_frames(sequence) as source:
+        start = time.perf_counter()
+        records = list(
+            localize_sequence(source, scene, boxes, preset("autotrack"), threads=threads)
+        )
+        elapsed = time.perf_counter() - start
+    valid = sum(bool(r.pose.valid) for r in records)
+    return {"seconds_per_frame": elapsed / len(records), "frames": len(records), "valid": valid}
 
-        boxes = json.loads((out / "boxes.json").read_text())
-    height, width = frames[0].shape[:2]
-    start = time.perf_counter()
-    valid = 0
-    for record in localize_sequence(frames, scene, boxes, preset("autotrack"), threads=threads):
-        valid += bool(record.pose.valid)
-    elapsed = time.perf_counter() - start
-    return elapsed / len(frames), valid, float(width * 10000 + height)
+
+_FIRST_FRAME_SCRIPT = """
+import time, sys
+import numpy as np
+from autotrack import AutoTrack, preset
+from autotrack.evaluation.datasets import load_otb_sequence
+from autotrack.io.frames import read_image
+sequence = load_otb_sequence(sys.argv[1])[0]
+tracker = AutoTrack(preset("autotrack"))
+tracker.init(read_image(sequence.frame_paths[0]), sequence.init_box)
+tracker.update(read_image(sequence.frame_paths[1]))
+print(time.time())
+"""
+
+
+def time_to_first_frame(cache_dir: Path) -> float:
+    """Seconds from launching `python` to its first tracked frame (kernel cache in cache_dir)."""
+    env = dict(os.environ, NUMBA_CACHE_DIR=str(cache_dir))
+    sequence = SHARED / "sequences" / "UAV123_10fps" / "building5"
+    start = time.time()
+    done = subprocess.run(
+        [sys.executable, "-c", _FIRST_FRAME_SCRIPT, str(sequence)],
+        env=env,
+        capture_output=True,
+        text=True,
+        check=True,
+    )
+    return float(done.stdout.split()[-1]) - start
 
 
 def guard(boxes_by_sequence: dict[str, np.ndarray]) -> bool:
@@ -89,8 +177,8 @@ def guard(boxes_by_sequence: dict[str, np.ndarray]) -> bool:
     mean precision@20 or mean AUC over the twelve sequences moving by more than 0.01 (the spec's
     bound for rounding noise), or a sequence whose boxes differ from its very first frames.
     """
-    from autotrack.datasets import read_boxes
-    from autotrack.evaluation import score_sequence
+    from autotrack.evaluation.metrics import score_sequence
+    from autotrack.io.otb_boxes import read_boxes
 
     print(
         f"\nregression guard (AutoTrack + published table vs {REFERENCE.name}/, {TOLERANCE_PX} px)"
@@ -98,11 +186,7 @@ def guard(boxes_by_sequence: dict[str, np.ndarray]) -> bool:
     ok = True
     ours, kept = [], []
     for name, boxes in sorted(boxes_by_sequence.items()):
-        reference_path = next(REFERENCE.glob(f"*/{name}.txt"), None)
-        if reference_path is None:
-            print(f"  {name:<14} no reference kept")
-            ok = False
-            continue
+        reference_path = next(REFERENCE.glob(f"*/{name}.txt"))
         reference = read_boxes(reference_path)
         truth = read_boxes(
             SHARED / "sequences" / reference_path.parent.name / name / "groundtruth_rect.txt"
@@ -135,61 +219,64 @@ def guard(boxes_by_sequence: dict[str, np.ndarray]) -> bool:
 
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--trackers", default="autotrack,strcf,autotrack+,csrt,kcf")
+    parser.add_argument("--trackers", default="autotrack,csrt", help="interleaved, one thread")
+    parser.add_argument("--repeats", type=int, default=3, help="runs per tracker and sequence")
+    parser.add_argument("--max-frames", type=int, default=None, help="first N frames only")
+    parser.add_argument("--multi-frames", type=int, default=300)
+    parser.add_argument("--skip-single", action="store_true")
     parser.add_argument("--skip-multi", action="store_true")
-    parser.add_argument("--multi-frames", type=int, default=80)
-    parser.add_argument("--multi-threads", type=int, default=2)
+    parser.add_argument("--skip-startup", action="store_true")
+    parser.add_argument("--skip-guard", action="store_true")
     args = parser.parse_args()
     if not SHARED.is_dir():
         print(f"needs {SHARED}", file=sys.stderr)
         return 2
-
-    trackers = [name.strip() for name in args.trackers.split(",") if name.strip()]
-    results = {}
-    for tracker in trackers:
-        table = str(COLOUR_TABLE) if tracker in ("autotrack", "strcf") else None
-        results[tracker] = _in_fresh_process(tracker, table)
-
+    load = os.getloadavg()
     print(
-        f"{'tracker':<11}{'median fps':>11}{'overall fps':>13}{'peak MB':>9}  (single thread, tracking time only)"
+        f"load average before the run: {load[0]:.1f} {load[1]:.1f} {load[2]:.1f} ({os.cpu_count()} cores)"
     )
-    medians = {}
-    for tracker, result in results.items():
-        rows = result["sequences"].values()
-        fps = [frames / seconds for frames, seconds, _ in rows]
-        total_frames = sum(frames for frames, _, _ in rows)
-        total_seconds = sum(seconds for _, seconds, _ in rows)
-        medians[tracker] = float(np.median(fps))
-        print(
-            f"{tracker:<11}{medians[tracker]:>11.1f}{total_frames / total_seconds:>13.1f}"
-            f"{result['peak_mb']:>9.0f}"
-        )
-    for name in ("autotrack", "autotrack+"):
-        if name in medians and "csrt" in medians:
-            print(f"{name} / CSRT median fps: {medians[name] / medians['csrt']:.2f}x")
-    print(
-        "\nper sequence fps: "
-        + ", ".join(
-            f"{name} {frames / seconds:.0f}"
-            for name, (frames, seconds, _) in results.get("autotrack", {"sequences": {}})[
-                "sequences"
-            ].items()
-        )
-    )
+
+    result = None
+    if not args.skip_single:
+        import cv2
+
+        cv2.setNumThreads(1)
+        trackers = [t.strip() for t in args.trackers.split(",") if t.strip()]
+        print(f"\nsingle target, {args.repeats} interleaved repeats per sequence:")
+        result = single_target(trackers, args.repeats, args.max_frames)
+        print_single_target(result)
 
     if not args.skip_multi:
-        _single_thread_env()
-        seconds, valid, _ = multi_target_pose(args.multi_frames, args.multi_threads)
+        with tempfile.TemporaryDirectory() as folder:
+            sequence = render_multi_sequence(Path(folder), args.multi_frames)
+            print(
+                f"\nfour targets + pose, {args.multi_frames} frames of 1280x720 JPEG, end to end:"
+            )
+            for threads in (1, 2):
+                multi = multi_target_pose(sequence, threads)
+                seconds = multi["seconds_per_frame"]
+                print(
+                    f"  {threads} thread{'s' if threads > 1 else ' '}: {seconds * 1e3:6.1f} ms/frame "
+                    f"= {1 / seconds:5.1f} frames/s ({multi['valid']}/{multi['frames']} valid poses)",
+                    flush=True,
+                )
+
+    if not args.skip_startup:
+        with tempfile.TemporaryDirectory() as cache:
+            first = time_to_first_frame(Path(cache))
+            second = time_to_first_frame(Path(cache))
         print(
-            f"\nfour targets + pose, 1280x720, {args.multi_threads} threads: "
-            f"{seconds * 1e3:.1f} ms/frame = {1 / seconds:.1f} fps ({valid}/{args.multi_frames} valid poses)"
+            f"\ntime to first tracked frame (fresh python process): first {first:.2f} s "
+            f"(empty kernel cache: compiles), second {second:.2f} s (cached kernels)"
         )
 
     ok = True
-    if "autotrack" in results:
-        boxes = {name: b for name, (_, _, b) in results["autotrack"]["sequences"].items()}
-        ok = guard(boxes)
-        print("guard:", "PASS" if ok else "FAIL: results changed (see above)")
+    if result is not None and not args.skip_guard:
+        if args.max_frames:
+            print("\nregression guard skipped: it needs whole sequences (no --max-frames)")
+        else:
+            ok = guard(result["boxes"])
+            print("guard:", "PASS" if ok else "FAIL: results changed (see above)")
     return 0 if ok else 1
 
 

@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 from autotrack.cli import main
-from autotrack.datasets import read_boxes
+from autotrack.io.otb_boxes import read_boxes
 from tests.sequences import moving_target_sequence
 
 

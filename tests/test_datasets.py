@@ -8,17 +8,17 @@ import cv2
 import numpy as np
 import pytest
 
-from autotrack.datasets import (
-    Sequence,
-    detect_layout,
-    load_sequences,
-    load_uav123,
-    read_boxes,
-    write_boxes,
-)
 from autotrack.errors import InputError
-
-SHARED = Path(__file__).resolve().parents[1] / ".." / "shared" / "data" / "sequences"
+from autotrack.evaluation.datasets import Sequence, detect_layout, load_sequences, load_uav123
+from autotrack.evaluation.metrics import score_sequence
+from autotrack.io.otb_boxes import read_boxes, write_boxes
+from tests.conftest import (
+    OCTAVE_REFERENCE,
+    OFFICIAL_REFERENCE,
+    SEQUENCES,
+    needs_sequences,
+    shared_sequence_dir,
+)
 
 
 def _write_images(folder: Path, count: int, prefix: str = "", digits: int = 6) -> list[Path]:
@@ -226,15 +226,55 @@ def test_unknown_layout_is_a_clear_error(tmp_path):
         load_sequences(tmp_path / "missing")
 
 
+def _shared_sequence_folders() -> list[Path]:
+    """Sequence folders of the shared data found straight from the file system."""
+    return sorted(
+        folder.parent for folder in SEQUENCES.glob("*/*/groundtruth_rect.txt") if folder.is_file()
+    )
+
+
+@needs_sequences
 def test_shared_data_root_of_otb_style_datasets():
-    if not SHARED.is_dir():
-        pytest.skip("shared data not available")
-    assert detect_layout(SHARED) == "collection"
-    sequences = load_sequences(SHARED)
-    assert len(sequences) == 18  # the dev set (../shared/data/README.md)
-    names = [s.name for s in sequences]
-    assert len(set(names)) == 18 and "boat5" in names and "group2_2" in names
-    boat = next(s for s in sequences if s.name == "boat5")
+    assert detect_layout(SEQUENCES) == "collection"
+    sequences = load_sequences(SEQUENCES)
+    # Expected from the data itself: every <dataset>/<sequence>/ folder with a ground truth.
+    folders = _shared_sequence_folders()
+    assert len(sequences) == len(folders)
+    by_name = {s.name: s for s in sequences}
+    assert len(by_name) == len(sequences)  # names are unique, so none was prefixed
+    assert {(s.dataset, s.name) for s in sequences} == {(f.parent.name, f.name) for f in folders}
+    for folder in folders:
+        sequence = by_name[folder.name]
+        frames = [p for p in (folder / "img").iterdir() if p.suffix.lower() in {".jpg", ".png"}]
+        rows = [line for line in (folder / "groundtruth_rect.txt").read_text().splitlines() if line]
+        assert len(sequence) == len(frames) == len(rows) == len(sequence.ground_truth), folder
+    # The original twelve dev sequences (the ones with a release reference) are all there.
+    original = {path.stem for path in OCTAVE_REFERENCE.glob("*/*.txt")}
+    assert original <= set(by_name)
+    boat = by_name["boat5"]
     assert boat.dataset == "UAV123_10fps" and len(boat) == 169
     np.testing.assert_array_equal(boat.ground_truth[0], [540, 295, 188, 130])  # file: 541,296
     assert boat.frames().read(0).shape == (720, 1280, 3)
+
+
+def test_nan_ground_truth_rows_of_group2_2_load_and_are_skipped_in_scoring():
+    folder = shared_sequence_dir("UAV123_10fps", "group2_2")
+    (sequence,) = load_sequences(folder)
+    gt = sequence.ground_truth
+    assert len(sequence) == len(gt) == 180
+    invisible = np.isnan(gt).all(axis=1)
+    # Rows 171-175 of the file (1-based) are NaN, every other row is a box.
+    assert np.flatnonzero(invisible).tolist() == [170, 171, 172, 173, 174]
+    assert np.isfinite(gt[~invisible]).all()
+    # Scoring skips them: a prediction that is wrong only there still scores 1.0 / full overlap.
+    wrong_there = gt.copy()
+    wrong_there[invisible] = [0.0, 0.0, 5.0, 5.0]
+    score = score_sequence("group2_2", wrong_there, gt)
+    assert score.scored_frames == 175
+    assert score.precision == 1.0 and score.success_curve[-2] == 1.0
+    # The authors' own boxes score P@20 0.960 over the 175 annotated frames (shared README).
+    official = OFFICIAL_REFERENCE / "UAV123_10fps" / "group2_2.txt"
+    if official.is_file():
+        authors = score_sequence("group2_2", read_boxes(official), gt)
+        assert authors.precision == pytest.approx(0.960, abs=5e-4)
+        assert authors.precision == pytest.approx(168 / 175)

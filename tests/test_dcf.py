@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from autotrack import dcf, regularization
+from autotrack.tracker import dcf, regularization
 
 
 def _random_spectra(rng: np.random.Generator, grid=(6, 8), channels=3):

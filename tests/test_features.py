@@ -12,7 +12,8 @@ import pytest
 import scipy.io
 
 from autotrack.errors import InputError
-from autotrack.features import (
+from autotrack.params import TrackerParams
+from autotrack.tracker.features import (
     COLOUR_PROTOTYPES,
     COLOUR_TERMS,
     RGB2GRAY_WEIGHTS,
@@ -30,8 +31,7 @@ from autotrack.features import (
     scale_features,
     srgb_to_lab,
 )
-from autotrack.fhog import fhog, fhog_batch
-from autotrack.params import TrackerParams
+from autotrack.tracker.fhog import fhog, fhog_batch
 from tests.conftest import COLOUR_TABLE, SEQUENCES
 
 PI32 = np.float32(3.14159265)

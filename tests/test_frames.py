@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from autotrack.errors import InputError
-from autotrack.frames import ImageSequence, VideoFrames, open_frames
+from autotrack.io.frames import ImageSequence, VideoFrames, open_frames
 from tests.conftest import shared_sequence_dir
 
 

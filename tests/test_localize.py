@@ -16,32 +16,24 @@ from scipy.spatial.transform import Rotation
 
 from autotrack.cli import main
 from autotrack.errors import InputError
-from autotrack.frames import open_frames
-from autotrack.localize import (
-    Localizer,
-    LocalizerParams,
-    associate,
-    format_table3,
-    localize_sequence,
-    project_points,
-    read_tum,
-    rotation_angle_deg,
-    search_correspondences,
-    trajectory_errors,
-    write_tum,
-)
+from autotrack.io.frames import open_frames
+from autotrack.io.tum import read_tum, write_tum
+from autotrack.localization.camera import project_points, rotation_angle_deg
+from autotrack.localization.localizer import Localizer, LocalizerParams
+from autotrack.localization.pnp import search_correspondences
+from autotrack.localization.scene import load_scene
+from autotrack.localization.trajectory import associate, format_table3, trajectory_errors
 from autotrack.params import preset
-from autotrack.scene import load_scene
-from autotrack.synthetic import (
+from autotrack.pipeline import localize_sequence
+from autotrack.synthetic.renderer import render_sequence
+from autotrack.synthetic.testbed import read_ground_truth_boxes
+from autotrack.synthetic.trajectories import (
     TRAJECTORIES,
     RenderSettings,
     SequenceSpec,
-    default_camera,
-    default_scene,
     ground_truth_poses,
-    read_ground_truth_boxes,
-    render_sequence,
 )
+from autotrack.synthetic.world import default_camera, default_scene
 
 CAMERA = default_camera(1280, 720, RenderSettings().distortion)
 SCENE = default_scene(CAMERA)
@@ -314,6 +306,7 @@ def short_sequence(tmp_path_factory):
     return render_sequence(tmp_path_factory.mktemp("localize") / "short", spec)
 
 
+@pytest.mark.slow
 def test_pipeline_on_a_generated_sequence_stays_within_three_centimetres(short_sequence):
     scene = load_scene(short_sequence / "scene.json")
     boxes = {k: v for k, v in json.loads((short_sequence / "boxes.json").read_text()).items()}
@@ -327,18 +320,17 @@ def test_pipeline_on_a_generated_sequence_stays_within_three_centimetres(short_s
     assert errors.missing_frames == 0, [r.pose.reason for r in records if not r.pose.valid]
     # At 640x360 a pixel is twice the angle of the paper's 1280x720 (measured: 1.8 cm).
     assert errors.rmse_cm < 3.0 and errors.max_error_cm < 8.0
-    assert set(records[5].tracks) == set(scene.landmark_ids)
+    assert set(records[5].landmark_tracks) == set(scene.landmark_ids)
 
 
 def test_pipeline_with_unknown_assignment_finds_the_landmarks(short_sequence):
     scene = load_scene(short_sequence / "scene.json")
     boxes = json.loads((short_sequence / "boxes.json").read_text())
     shuffled = [boxes[k] for k in ("C", "A", "D", "B")]
-    frames = (open_frames(short_sequence).read(i) for i in range(3))
-    records = list(
-        localize_sequence(frames, scene, shuffled, preset("autotrack"), assignment_known=False)
-    )
-    for landmark_id, track in records[0].tracks.items():
+    frames = [open_frames(short_sequence).read(i) for i in range(3)]
+    records = list(localize_sequence(frames, scene, shuffled, preset("autotrack")))
+    assert set(records[0].landmark_tracks) == set(scene.landmark_ids)
+    for landmark_id, track in records[0].landmark_tracks.items():
         np.testing.assert_allclose(track.box, boxes[landmark_id], atol=1.0)
     assert all(r.pose.valid for r in records)
 
@@ -352,6 +344,7 @@ def test_pipeline_rejects_intrinsics_for_another_image_size(short_sequence):
         next(localize_sequence(open_frames(short_sequence), other, boxes, preset("autotrack")))
 
 
+@pytest.mark.slow
 def test_pipeline_survives_a_landmark_that_disappears(short_sequence):
     """Landmark C is painted over from frame 8: every frame is then a trusted pose close to the
     truth or an explicitly invalid one, never a crash or a silent wrong pose."""
@@ -386,6 +379,7 @@ def test_pipeline_survives_a_landmark_that_disappears(short_sequence):
     assert sum(noticed) >= len(noticed) // 2
 
 
+@pytest.mark.slow
 def test_cli_localize_writes_tum_and_csv_and_prints_table3(short_sequence, tmp_path, capsys):
     out, tracks = tmp_path / "poses.tum", tmp_path / "tracks.csv"
     code = main(

@@ -10,8 +10,9 @@ import pytest
 from mcap.reader import make_reader
 
 from autotrack.cli import main
-from autotrack.datasets import read_boxes
-from autotrack.localize import read_tum
+from autotrack.io.otb_boxes import read_boxes
+from autotrack.io.tum import read_tum
+from autotrack.sessions import open_session
 from tests.conftest import REPO
 
 DEMO = REPO / "static" / "demo"
@@ -55,6 +56,10 @@ def test_localize_session_round_trips_to_the_same_tracks_and_poses(tmp_path, cap
     assert len(columns) == FRAMES
     valid_poses = int(np.sum(columns["valid"]))
 
+    # Targets are T1.., each recorded with the landmark it localises.
+    target_of = {lm: target for target, lm in open_session(session).landmark_ids.items()}
+    assert sorted(target_of) == list(LANDMARKS)
+
     assert main(["session", "info", str(session)]) == 0
     info = _info_fields(capsys.readouterr().out)
     assert info["frames"] == f"{FRAMES} tracked (frames 0-{FRAMES - 1}) at 10 fps"
@@ -63,7 +68,7 @@ def test_localize_session_round_trips_to_the_same_tracks_and_poses(tmp_path, cap
     assert info["scene"] == str(DEMO / "scene.json")
     for landmark in LANDMARKS:
         aberrant = int(np.sum(columns[f"{landmark}_aberrant"]))
-        assert info[f"target {landmark}"] == (
+        assert info[f"target {target_of[landmark]}"] == (
             f"{FRAMES} boxes (frames 0-{FRAMES - 1}), {aberrant} aberrant, landmark {landmark}"
         )
     assert info["poses"] == f"{valid_poses} valid of {FRAMES}"
@@ -76,11 +81,11 @@ def test_localize_session_round_trips_to_the_same_tracks_and_poses(tmp_path, cap
     expected = Counter({"/events": len(LANDMARKS), "/landmarks": 1})
     expected.update({topic: valid_poses for topic in ("/camera/pose", "/tf")})
     expected["/camera/pose_quality"] = FRAMES
-    for landmark in LANDMARKS:
-        expected[f"/targets/{landmark}/box"] = FRAMES
-        expected[f"/targets/{landmark}/signals"] = FRAMES
-        expected[f"/targets/{landmark}/response"] = FRAMES - 1
-        expected[f"/targets/{landmark}/local_variation"] = FRAMES - 2
+    for target in target_of.values():
+        expected[f"/targets/{target}/box"] = FRAMES
+        expected[f"/targets/{target}/signals"] = FRAMES
+        expected[f"/targets/{target}/response"] = FRAMES - 1
+        expected[f"/targets/{target}/local_variation"] = FRAMES - 2
     assert counts == expected
     assert info["complete"] == f"yes ({sum(counts.values())} messages)"
 
@@ -95,8 +100,8 @@ def test_localize_session_round_trips_to_the_same_tracks_and_poses(tmp_path, cap
     for a, b in zip(direct, replayed, strict=True):
         np.testing.assert_allclose(a, b, atol=1e-6)
     # Same per-frame boxes as the localize CSV, per landmark.
-    for landmark in LANDMARKS:
-        boxes = read_boxes(exported / "tracks" / f"{landmark}.txt")
+    for landmark, target in target_of.items():
+        boxes = read_boxes(exported / "tracks" / f"{target}.txt")
         expected_boxes = np.stack([columns[f"{landmark}_{k}"] for k in "xywh"], axis=1)
         assert boxes.shape == (FRAMES, 4)
         np.testing.assert_allclose(boxes, expected_boxes, atol=0.01)

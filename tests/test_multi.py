@@ -9,16 +9,13 @@ import numpy as np
 import pytest
 
 from autotrack.errors import InputError
-from autotrack.frames import open_frames
-from autotrack.multi import MultiTracker
+from autotrack.io.frames import open_frames
 from autotrack.params import preset
-from autotrack.synthetic import (
-    RenderSettings,
-    SequenceSpec,
-    read_ground_truth_boxes,
-    render_sequence,
-)
-from autotrack.tracker import AutoTrack
+from autotrack.synthetic.renderer import render_sequence
+from autotrack.synthetic.testbed import read_ground_truth_boxes
+from autotrack.synthetic.trajectories import RenderSettings, SequenceSpec
+from autotrack.tracker.multi import MultiTracker
+from autotrack.tracker.tracker import AutoTrack
 
 FRAMES = 12
 

@@ -8,8 +8,8 @@ import numpy as np
 import pytest
 
 from autotrack.errors import SceneError
-from autotrack.scene import (
-    CameraIntrinsics,
+from autotrack.localization.camera import CameraIntrinsics
+from autotrack.localization.scene import (
     Landmark,
     Scene,
     load_scene,

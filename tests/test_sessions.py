@@ -15,20 +15,17 @@ import pytest
 from mcap.reader import make_reader
 from mcap.writer import Writer
 
-from autotrack import sessions
+import autotrack.sessions.metadata
 from autotrack.cli import main
-from autotrack.datasets import read_boxes
 from autotrack.errors import SessionError
+from autotrack.io.otb_boxes import read_boxes
+from autotrack.localization.camera import CameraIntrinsics
+from autotrack.localization.scene import Landmark, Scene, save_scene
 from autotrack.params import TrackerParams, preset
 from autotrack.result import TrackResult
-from autotrack.scene import CameraIntrinsics, Landmark, Scene, save_scene
-from autotrack.sessions import (
-    SessionRecorder,
-    dequantise_map,
-    last_state,
-    open_session,
-    quantise_map,
-)
+from autotrack.sessions import SessionRecorder, open_session
+from autotrack.sessions.encoding import FORMAT_VERSION, dequantise_map, quantise_map
+from autotrack.sessions.schemas import SCHEMA_NAMES, schema_document
 
 FPS = 25.0
 FRAMES = 40
@@ -37,7 +34,7 @@ MAP_SHAPE = (50, 50)
 
 @dataclass(frozen=True)
 class _Pose:
-    """The attributes of autotrack.localize.PoseEstimate the recorder reads."""
+    """The attributes of autotrack.result.PoseEstimate the recorder reads."""
 
     frame_index: int
     valid: bool
@@ -198,7 +195,7 @@ def recorded(tmp_path_factory: pytest.TempPathFactory) -> Recorded:
 def test_round_trip_restores_tracks_signals_poses_events(recorded: Recorded) -> None:
     session = open_session(recorded.path)
     assert not session.truncated
-    assert session.format_version == sessions.FORMAT_VERSION
+    assert session.format_version == FORMAT_VERSION
     assert session.targets == ("t1", "t2", "t3")
     assert session.fps == FPS
     np.testing.assert_array_equal(session.frame_indices, np.arange(FRAMES))
@@ -247,7 +244,7 @@ def test_round_trip_restores_camera_poses(recorded: Recorded) -> None:
             assert poses.mean_reprojection_error[row] == 9.5
 
 
-def test_events_and_last_state_follow_the_user_edits(recorded: Recorded) -> None:
+def test_events_and_last_boxes_follow_the_user_edits(recorded: Recorded) -> None:
     session = open_session(recorded.path)
     kinds = [(e.kind, e.frame_index, e.target_id) for e in session.events]
     assert kinds == [
@@ -261,7 +258,7 @@ def test_events_and_last_state_follow_the_user_edits(recorded: Recorded) -> None
     assert corrected.box == (1.0, 2.0, 3.0, 4.0)
     assert corrected.extra == {"previous_box": [5, 6, 7, 8]}
     assert corrected.wall_time > 1.6e9
-    state = last_state(session)
+    state = session.last_boxes
     assert set(state) == {"t1", "t2"}  # t3 was deleted
     assert state["t1"] == (FRAMES - 1, recorded.results["t1"][-1].box)
     assert state["t2"] == (FRAMES - 1, recorded.results["t2"][-1].box)
@@ -297,7 +294,7 @@ def test_quantise_map_keeps_the_range_and_handles_constant_maps() -> None:
 
 
 def test_real_tracker_run_round_trips(tmp_path: Path) -> None:
-    from autotrack.tracker import AutoTrack
+    from autotrack.tracker.tracker import AutoTrack
 
     frames, boxes = _generated_sequence(12)
     params = TrackerParams()
@@ -357,38 +354,35 @@ def test_localization_run_round_trips_through_export(
 ) -> None:
     """A real localisation run (synthetic test bed): recorded tracks and PoseEstimates come back
     out of `session export` as the pipeline's own boxes and TUM trajectory."""
-    from autotrack.frames import open_frames
-    from autotrack.localize import localize_sequence, read_tum, write_tum
-    from autotrack.scene import load_scene
-    from autotrack.synthetic import RenderSettings, SequenceSpec, render_sequence
+    from autotrack.io.frames import open_frames
+    from autotrack.io.tum import read_tum, write_tum
+    from autotrack.localization.scene import load_scene
+    from autotrack.pipeline import Recording, localize_sequence
+    from autotrack.synthetic.renderer import render_sequence
+    from autotrack.synthetic.trajectories import RenderSettings, SequenceSpec
 
     spec = SequenceSpec("s", "circle", 8, 0, RenderSettings(width=640, height=360), period_s=45.0)
     folder = render_sequence(tmp_path / "synthetic", spec)
     scene = load_scene(folder / "scene.json")
     boxes = json.loads((folder / "boxes.json").read_text())
     frames = open_frames(folder / "img")
-    outputs = []
-    with SessionRecorder(
-        tmp_path / "localize.mcap",
-        source=str(folder),
-        tracker_params=TrackerParams(),
-        scene_path=folder / "scene.json",
-        fps=10.0,
-    ) as recorder:
-        recorder.log_landmarks(scene)
-        for output in localize_sequence(frames, scene, boxes, TrackerParams()):
-            for landmark_id, result in output.tracks.items():
-                recorder.log_target(landmark_id, result, landmark_id=landmark_id)
-            recorder.log_pose(output.pose)
-            outputs.append(output)
+    recording = Recording(
+        source=str(folder), path=tmp_path / "localize.mcap", scene_path=folder / "scene.json"
+    )
+    outputs = list(
+        localize_sequence(frames, scene, boxes, TrackerParams(), recording=recording, fps=10.0)
+    )
     assert any(o.pose.valid for o in outputs)
     out = tmp_path / "export"
     argv = ["session", "export", str(tmp_path / "localize.mcap"), "--tracks", str(out)]
     assert main([*argv, "--poses", str(out / "poses.tum")]) == 0
     capsys.readouterr()
+    session = open_session(tmp_path / "localize.mcap")
+    target_of = {landmark: target for target, landmark in session.landmark_ids.items()}
     for landmark_id in boxes:
-        expected = np.array([o.tracks[landmark_id].box for o in outputs])
-        np.testing.assert_allclose(read_boxes(out / f"{landmark_id}.txt"), expected, atol=1e-4)
+        expected = np.array([o.landmark_tracks[landmark_id].box for o in outputs])
+        exported = read_boxes(out / f"{target_of[landmark_id]}.txt")
+        np.testing.assert_allclose(exported, expected, atol=1e-4)
     valid = [o.pose for o in outputs if o.pose.valid]
     write_tum(
         tmp_path / "direct.tum",
@@ -400,8 +394,7 @@ def test_localization_run_round_trips_through_export(
         read_tum(out / "poses.tum"), read_tum(tmp_path / "direct.tum"), strict=True
     ):
         np.testing.assert_array_equal(exported, direct)
-    session = open_session(tmp_path / "localize.mcap")
-    assert session.landmark_ids == {landmark_id: landmark_id for landmark_id in boxes}
+    assert sorted(session.landmark_ids.values()) == sorted(boxes)
     assert set(session.landmarks) == set(scene.landmark_ids)
     assert session.poses.reasons == tuple(o.pose.reason for o in outputs)
 
@@ -492,40 +485,50 @@ def test_mcap_reader_validates_file_and_channels_use_the_claimed_schemas(
         assert summary.statistics.message_count == sum(counts.values())
         assert reader.get_header().library.startswith("autotrack-studio")
         metadata = {record.name: record.metadata for record in reader.iter_metadata()}
-        assert metadata["autotrack.session"]["format_version"] == str(sessions.FORMAT_VERSION)
+        assert metadata["autotrack.session"]["format_version"] == str(FORMAT_VERSION)
 
 
-def test_foxglove_schemas_have_the_well_known_fields() -> None:
-    pose = json.loads(sessions.SCHEMAS["foxglove.PoseInFrame"])
-    assert set(pose["properties"]) == {"timestamp", "frame_id", "pose"}
-    assert pose["properties"]["timestamp"]["properties"]["nsec"]["maximum"] == 999_999_999
-    assert set(pose["properties"]["pose"]["properties"]["orientation"]["properties"]) == {
-        "x",
-        "y",
-        "z",
-        "w",
-    }
-    transform = json.loads(sessions.SCHEMAS["foxglove.FrameTransform"])
-    assert set(transform["properties"]) == {
-        "timestamp",
-        "parent_frame_id",
-        "child_frame_id",
-        "translation",
-        "rotation",
-    }
-    raw = json.loads(sessions.SCHEMAS["foxglove.RawImage"])
-    assert raw["properties"]["data"] == {
-        "type": "string",
-        "contentEncoding": "base64",
-        "description": "Raw image data",
-    }
-    annotations = json.loads(sessions.SCHEMAS["foxglove.ImageAnnotations"])
-    points = annotations["properties"]["points"]["items"]
-    assert points["title"] == "foxglove.PointsAnnotation"
-    assert [o["title"] for o in points["properties"]["type"]["oneOf"]][2] == "LINE_LOOP"
-    scene = json.loads(sessions.SCHEMAS["foxglove.SceneUpdate"])
-    entity = scene["properties"]["entities"]["items"]["properties"]
-    assert {"spheres", "texts", "cubes", "lines", "models", "lifetime"} <= set(entity)
+def test_foxglove_schemas_are_the_published_ones_unchanged() -> None:
+    # Foxglove names its well-known schemas by title; ours carry the autotrack prefix.
+    for name in SCHEMA_NAMES:
+        document = schema_document(name)
+        assert document["title"] == name
+        if name.startswith("foxglove."):
+            assert document["$comment"] == "Generated by https://github.com/foxglove/foxglove-sdk"
+
+
+def _validate_every_message(path: Path) -> dict[str, int]:
+    """Validate every message of a session against the schema its channel names; returns the
+    number of messages per schema."""
+    import jsonschema
+
+    counts: dict[str, int] = {}
+    with open(path, "rb") as handle:
+        for schema, channel, message in make_reader(handle).iter_messages():
+            assert (schema.encoding, channel.message_encoding) == ("jsonschema", "json")
+            assert json.loads(schema.data) == schema_document(schema.name)
+            jsonschema.validate(json.loads(message.data), json.loads(schema.data))
+            counts[schema.name] = counts.get(schema.name, 0) + 1
+    return counts
+
+
+def test_every_recorded_message_validates_against_its_published_schema(
+    recorded: Recorded, tmp_path: Path
+) -> None:
+    counts = _validate_every_message(recorded.path)
+    frames_path = tmp_path / "frames.mcap"
+    with SessionRecorder(frames_path, source="x", tracker_params={}, embed_frames=True) as rec:
+        rec.log_frame(0, np.zeros((8, 8, 3), dtype=np.uint8))
+    counts.update(_validate_every_message(frames_path))
+    assert set(counts) == set(SCHEMA_NAMES)
+
+
+def test_a_message_off_its_schema_is_caught() -> None:
+    import jsonschema
+
+    image = {"timestamp": {"sec": 0, "nsec": 2_000_000_000}, "width": 4}
+    with pytest.raises(jsonschema.ValidationError, match="999999999"):
+        jsonschema.validate(image, schema_document("foxglove.RawImage"))
 
 
 def test_poses_go_to_world_camera_transform_and_pose_in_world(recorded: Recorded) -> None:
@@ -634,7 +637,7 @@ def test_non_mcap_empty_missing_and_foreign_files_get_clear_errors(tmp_path: Pat
 def test_session_from_a_newer_format_version_is_refused(
     tmp_path: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:
-    monkeypatch.setattr(sessions, "FORMAT_VERSION", sessions.FORMAT_VERSION + 1)
+    monkeypatch.setattr(autotrack.sessions.metadata, "FORMAT_VERSION", FORMAT_VERSION + 1)
     with SessionRecorder(tmp_path / "new.mcap", source="x", tracker_params={}) as recorder:
         recorder.log_target("t1", _results(0, range(2), 1)[1])
     monkeypatch.undo()

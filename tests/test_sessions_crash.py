@@ -36,7 +36,7 @@ import json, math, sys, time
 import numpy as np
 from autotrack.params import TrackerParams
 from autotrack.sessions import SessionRecorder
-from autotrack.tracker import AutoTrack
+from autotrack.tracker.tracker import AutoTrack
 
 path = sys.argv[1]
 rng = np.random.default_rng(3)

@@ -9,22 +9,20 @@ import numpy as np
 import pytest
 
 from autotrack.cli import main
-from autotrack.localize import project_points, read_tum
-from autotrack.scene import load_scene, scene_warnings
-from autotrack.synthetic import (
+from autotrack.io.tum import read_tum
+from autotrack.localization.camera import project_points
+from autotrack.localization.scene import load_scene, scene_warnings
+from autotrack.synthetic.renderer import Renderer, render_sequence
+from autotrack.synthetic.testbed import read_ground_truth_boxes, sequence_specs
+from autotrack.synthetic.trajectories import (
     PAPER_FRAME_COUNTS,
     TRAJECTORIES,
-    Renderer,
     RenderSettings,
     SequenceSpec,
-    default_camera,
     frame_conditions,
     ground_truth_poses,
-    read_ground_truth_boxes,
-    render_sequence,
-    sequence_specs,
-    visibility_problems,
 )
+from autotrack.synthetic.world import default_camera, visibility_problems
 
 SMALL = RenderSettings(width=640, height=360)
 

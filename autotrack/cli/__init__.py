@@ -5,11 +5,15 @@ from __future__ import annotations
 import argparse
 import importlib
 import sys
+from importlib.metadata import entry_points
 
 from autotrack.errors import AutoTrackError
 
 # Each module defines `add_parser(subparsers)`; the parser it adds sets `func`.
-_COMMAND_MODULES = ("track", "bench", "localize", "session", "app")
+_COMMAND_MODULES = ("track", "bench", "sweep", "localize", "synth", "session")
+COMMANDS_ENTRY_POINT_GROUP = "autotrack.commands"
+"""Other packages add sub-commands here: an entry point naming their `add_parser` (the web app
+adds `autotrack app` this way, so the library never imports it)."""
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -19,13 +23,9 @@ def build_parser() -> argparse.ArgumentParser:
     )
     subparsers = parser.add_subparsers(dest="command", required=True)
     for name in _COMMAND_MODULES:
-        try:
-            module = importlib.import_module(f"autotrack.cli.{name}")
-        except ModuleNotFoundError as error:
-            if error.name == f"autotrack.cli.{name}":
-                continue
-            raise
-        module.add_parser(subparsers)
+        importlib.import_module(f"autotrack.cli.{name}").add_parser(subparsers)
+    for entry_point in entry_points(group=COMMANDS_ENTRY_POINT_GROUP):
+        entry_point.load()(subparsers)
     return parser
 
 

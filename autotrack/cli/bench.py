@@ -6,7 +6,7 @@ import argparse
 import json
 from pathlib import Path
 
-from autotrack.peers import TRACKER_NAMES
+from autotrack.evaluation.peers import TRACKER_NAMES
 
 DEFAULT_TRACKERS = ",".join(TRACKER_NAMES)
 
@@ -58,13 +58,20 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
         metavar="PATH",
         help="published Color Names table (32768 x 10, .npy or .mat) for the AutoTrack variants",
     )
+    parser.add_argument(
+        "--scheduler",
+        default=None,
+        metavar="tcp://HOST:PORT",
+        help="run on this Dask scheduler's workers (they need the data at the same path)",
+    )
     parser.add_argument("--no-progress", action="store_true", help="hide the progress bar")
     parser.set_defaults(func=run)
 
 
 def run(args: argparse.Namespace) -> int:
     """Run the benchmark described by the parsed arguments."""
-    from autotrack.benchmark import (
+    from autotrack.errors import InputError
+    from autotrack.evaluation.benchmark import (
         format_table,
         run_benchmark,
         summarize_run,
@@ -72,21 +79,23 @@ def run(args: argparse.Namespace) -> int:
         validate_tracker_names,
         write_run_plots,
     )
-    from autotrack.datasets import load_sequences
-    from autotrack.errors import InputError
+    from autotrack.evaluation.datasets import load_sequences
+    from autotrack.evaluation.distributed import cluster_executor_for
 
     trackers = validate_tracker_names(args.trackers.split(","))
     if args.jobs < 1:
         raise InputError(f"--jobs must be at least 1, got {args.jobs}")
     sequences = load_sequences(args.root)
-    run_result = run_benchmark(
-        sequences,
-        trackers,
-        args.out,
-        jobs=args.jobs,
-        colour_table=args.colour_table,
-        progress=not args.no_progress,
-    )
+    with cluster_executor_for(args) as executor:
+        run_result = run_benchmark(
+            sequences,
+            trackers,
+            args.out,
+            jobs=args.jobs,
+            colour_table=args.colour_table,
+            progress=not args.no_progress,
+            executor=executor,
+        )
     summaries = summarize_run(run_result)
     print(
         f"{len(sequences)} sequences, {sum(len(s) for s in sequences)} frames; "

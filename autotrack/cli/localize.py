@@ -1,42 +1,34 @@
-"""`autotrack localize` (camera trajectory from four tracked landmarks) and `autotrack synth`
-(the synthetic test bed)."""
+"""`autotrack localize`: the camera trajectory from four tracked landmarks, over the pipeline."""
 
 from __future__ import annotations
 
 import argparse
-import contextlib
-import csv
-import json
 import math
 import sys
-from collections.abc import Sequence
+from collections.abc import Iterator, Sequence
+from dataclasses import replace
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from tqdm import tqdm
 
-from autotrack.errors import BoxError, InputError
-from autotrack.params import PRESETS, TrackerParams, preset
-from autotrack.scene import Scene, load_scene, scene_warnings
+from autotrack.cli.live import add_live_arguments, check_source, run_localize_live
+from autotrack.errors import InputError
+from autotrack.io.boxes_json import read_boxes_json
+from autotrack.io.csv_table import write_csv
+from autotrack.io.live import source_argument
+from autotrack.localization.scene import Scene, load_scene, scene_warnings
+from autotrack.params import PRESETS, preset
 
 if TYPE_CHECKING:
-    from autotrack.sessions import SessionRecorder
+    from autotrack.pipeline import FrameOutcome
 
 DEFAULT_FPS = 10.0
 LARGE_ERROR_CM = 20.0
 
 
 def add_parser(subparsers: argparse._SubParsersAction) -> None:
-    _add_localize(subparsers)
-    _add_synth(subparsers)
-
-
-# ---------------------------------------------------------------------------------------------
-# autotrack localize
-
-
-def _add_localize(subparsers: argparse._SubParsersAction) -> None:
     parser = subparsers.add_parser(
         "localize",
         help="camera trajectory from four tracked landmarks of known position",
@@ -48,7 +40,12 @@ def _add_localize(subparsers: argparse._SubParsersAction) -> None:
             "See docs/localization.md."
         ),
     )
-    parser.add_argument("sequence", type=Path, help="folder of images, video, or sequence folder")
+    parser.add_argument(
+        "sequence",
+        type=source_argument,
+        help="folder of images, video, or sequence folder; with --realtime a camera index, "
+        "stream URL or video",
+    )
     parser.add_argument(
         "--scene",
         type=Path,
@@ -82,8 +79,8 @@ def _add_localize(subparsers: argparse._SubParsersAction) -> None:
         "--threads",
         type=int,
         default=2,
-        help="track the landmarks on this many threads (default 2: 28.8 fps instead of 22.4 "
-        "for four targets at 1280x720 on a 2-core machine)",
+        help="track the landmarks on this many threads "
+        "(default 2; docs/benchmarks.md has the frame rates for 1 and 2 threads)",
     )
     parser.add_argument(
         "--max-rms",
@@ -101,57 +98,30 @@ def _add_localize(subparsers: argparse._SubParsersAction) -> None:
         "`autotrack session`)",
     )
     parser.add_argument("--quiet", action="store_true", help="no progress bar")
+    add_live_arguments(parser)
     parser.set_defaults(func=run_localize)
 
 
-def read_init_boxes(path: Path) -> dict[str, tuple[float, float, float, float]] | list:
-    """boxes.json: {landmark id: [x, y, w, h]} (0-based pixels), or a list of boxes."""
-    try:
-        data = json.loads(path.read_text(encoding="utf-8"))
-    except OSError as error:
-        raise InputError(f"cannot read boxes file {path}: {error.strerror or error}") from None
-    except json.JSONDecodeError as error:
-        raise InputError(f"boxes file {path} is not valid JSON (line {error.lineno})") from None
-
-    def box(value: Any, where: str) -> tuple[float, float, float, float]:
-        if (
-            not isinstance(value, list)
-            or len(value) != 4
-            or not all(isinstance(v, int | float) and not isinstance(v, bool) for v in value)
-        ):
-            raise BoxError(f"{path}: {where} must be [x, y, w, h] (four numbers, 0-based pixels)")
-        x, y, w, h = (float(v) for v in value)
-        if w <= 0 or h <= 0 or not all(math.isfinite(v) for v in (x, y, w, h)):
-            raise BoxError(f"{path}: {where} needs a positive width and height")
-        return (x, y, w, h)
-
-    if isinstance(data, dict):
-        return {str(k): box(v, f"the box of {k!r}") for k, v in data.items()}
-    if isinstance(data, list):
-        return [box(v, f"box {i + 1}") for i, v in enumerate(data)]
-    raise InputError(f"{path}: expected {{landmark id: [x, y, w, h]}} or a list of boxes")
-
-
-def _default_file(given: Path | None, sequence: Path, name: str, option: str) -> Path:
+def _default_file(given: Path | None, sequence: Path | str, name: str, option: str) -> Path:
     if given is not None:
         return given
-    candidate = sequence / name
-    if sequence.is_dir() and candidate.is_file():
+    candidate = Path(sequence) / name
+    if Path(sequence).is_dir() and candidate.is_file():
         return candidate
     raise InputError(f"give {option} (no {name} in {sequence})")
 
 
 def run_localize(args: argparse.Namespace) -> int:
-    from dataclasses import replace
-
-    from autotrack.frames import open_frames
-    from autotrack.localize import LocalizerParams, localize_sequence
+    from autotrack.io.frames import open_frames
+    from autotrack.io.tum import read_tum
+    from autotrack.localization.localizer import LocalizerParams
+    from autotrack.pipeline import Recording, localize_sequence
 
     scene_path = _default_file(args.scene, args.sequence, "scene.json", "--scene")
     scene = load_scene(scene_path)
     for warning in scene_warnings(scene):
         print(f"autotrack: warning: {warning}", file=sys.stderr)
-    init = read_init_boxes(_default_file(args.init, args.sequence, "boxes.json", "--init"))
+    init = read_boxes_json(_default_file(args.init, args.sequence, "boxes.json", "--init"))
     if args.threads < 1:
         raise InputError("--threads must be at least 1")
     localizer_params = LocalizerParams()
@@ -159,33 +129,40 @@ def run_localize(args: argparse.Namespace) -> int:
         if args.max_rms <= 0:
             raise InputError("--max-rms must be positive")
         localizer_params = replace(localizer_params, max_rms_error_px=args.max_rms)
-    gt = None
-    if args.gt is not None:
-        from autotrack.localize import read_tum
-
-        gt = read_tum(args.gt)
+    gt = None if args.gt is None else read_tum(args.gt)
+    check_source(args)
+    if args.realtime:
+        return run_localize_live(
+            args,
+            scene=scene,
+            scene_path=scene_path,
+            init=init,
+            tracker_params=preset(args.preset),
+            localizer_params=localizer_params,
+            gt=gt,
+        )
     frames = open_frames(args.sequence)
     fps = args.fps or frames.fps or DEFAULT_FPS
     if fps <= 0:
         raise InputError("--fps must be positive")
+    recording = None
+    if args.session is not None:
+        recording = Recording(source=str(args.sequence), path=args.session, scene_path=scene_path)
     records = []
-    tracker_params = preset(args.preset)
-    recorder = _open_recorder(args.session, args.sequence, tracker_params, scene_path, fps)
     progress = tqdm(total=len(frames), unit="frame", desc=frames.name, disable=args.quiet)
-    with frames, progress, recorder or contextlib.nullcontext():
-        pipeline = localize_sequence(
+    with frames, progress:
+        outcomes = localize_sequence(
             frames,
             scene,
             init,
-            tracker_params,
+            preset(args.preset),
             localizer_params,
-            assignment_known=isinstance(init, dict),
+            recording=recording,
+            fps=fps,
             threads=args.threads,
         )
-        for record in pipeline:
-            records.append(record)
-            if recorder is not None:
-                _record_frame(recorder, record, scene)
+        for outcome in outcomes:
+            records.append(outcome)
             progress.update()
     timestamps = np.arange(len(records)) / fps
     report = summarise(records, timestamps, scene, args.out, args.tracks, gt, frames.name)
@@ -195,40 +172,8 @@ def run_localize(args: argparse.Namespace) -> int:
     return 0
 
 
-def _open_recorder(
-    session: Path | None,
-    sequence: Path,
-    tracker_params: TrackerParams,
-    scene_path: Path,
-    fps: float,
-) -> SessionRecorder | None:
-    """A SessionRecorder writing `session` (a new file), or None without --session."""
-    if session is None:
-        return None
-    from autotrack.sessions import SessionRecorder
-
-    return SessionRecorder(
-        session,
-        source=str(sequence),
-        tracker_params=tracker_params,
-        scene_path=scene_path,
-        fps=fps,
-    )
-
-
-def _record_frame(recorder: SessionRecorder, record: Any, scene: Scene) -> None:
-    """One frame of the pipeline into the session: landmarks and first boxes, tracks, pose."""
-    if record.frame_index == 0:
-        recorder.log_landmarks(scene)
-        for landmark_id, track in record.tracks.items():
-            recorder.log_event("box_drawn", 0, landmark_id, track.box)
-    for landmark_id, track in record.tracks.items():
-        recorder.log_target(landmark_id, track, landmark_id=landmark_id)
-    recorder.log_pose(record.pose)
-
-
 def summarise(
-    records: Sequence[Any],
+    records: Sequence[FrameOutcome],
     timestamps: np.ndarray,
     scene: Scene,
     out: Path | None,
@@ -237,12 +182,14 @@ def summarise(
     name: str,
 ) -> str:
     """Write the requested files and return the text report (`name` labels the Table-3 row)."""
-    from autotrack.localize import format_table3, trajectory_errors, write_tum
+    from autotrack.io.tum import write_tum
+    from autotrack.localization.trajectory import format_table3, trajectory_errors
 
-    positions = np.array([r.pose.position for r in records]).reshape(-1, 3)
-    quaternions = np.array([r.pose.quaternion_xyzw() for r in records]).reshape(-1, 4)
-    valid = sum(r.pose.valid for r in records)
-    three = sum(r.pose.valid and len(r.pose.used_landmarks) == 3 for r in records)
+    poses = [record.pose for record in records]
+    positions = np.array([pose.position for pose in poses]).reshape(-1, 3)
+    quaternions = np.array([pose.quaternion_xyzw() for pose in poses]).reshape(-1, 4)
+    valid = sum(pose.valid for pose in poses)
+    three = sum(pose.valid and len(pose.used_landmarks) == 3 for pose in poses)
     lines = [
         f"frames: {len(records)}  valid poses: {valid} ({three} from three landmarks)  "
         f"invalid: {len(records) - valid}"
@@ -253,7 +200,7 @@ def summarise(
         lines.append(f"poses written to {out} ({written} rows, TUM camera-to-world)")
     if tracks is not None:
         tracks.parent.mkdir(parents=True, exist_ok=True)
-        write_tracks_csv(tracks, records, timestamps, scene)
+        write_csv(tracks, _tracks_header(scene), _tracks_rows(records, timestamps, scene))
         lines.append(f"per-frame tracks written to {tracks}")
     if gt is not None:
         gt_times, gt_positions, _ = gt
@@ -264,105 +211,37 @@ def summarise(
     return "\n".join(lines)
 
 
-def write_tracks_csv(
-    path: Path, records: Sequence[Any], timestamps: np.ndarray, scene: Scene
-) -> None:
-    """One row per frame: pose (NaN when invalid), validity, landmarks used and left out (why),
-    reason when invalid, and per landmark its box, peak score, aberrance flag and reprojection
-    error."""
-    ids = scene.landmark_ids
+def _tracks_header(scene: Scene) -> list[str]:
+    """Columns of --tracks: pose (NaN when invalid), validity, landmarks used and left out
+    (why), reason when invalid, and per landmark its box, peak score, aberrance flag and
+    reprojection error."""
     header = ["frame", "timestamp", "valid", "tx", "ty", "tz", "qx", "qy", "qz", "qw"]
     header += ["rms_px", "position_std_m", "used", "excluded", "reason"]
-    for landmark_id in ids:
+    for landmark_id in scene.landmark_ids:
         header += [
             f"{landmark_id}_{k}" for k in ("x", "y", "w", "h", "peak", "aberrant", "error_px")
         ]
-    with path.open("w", newline="", encoding="utf-8") as handle:
-        writer = csv.writer(handle)
-        writer.writerow(header)
-        for record, stamp in zip(records, timestamps, strict=True):
-            pose = record.pose
-            row: list[Any] = [record.frame_index, f"{stamp:.6f}", int(pose.valid)]
-            row += [f"{v:.6f}" for v in pose.position]
-            row += [f"{v:.6f}" for v in pose.quaternion_xyzw()]
-            row += [f"{pose.rms_error_px:.3f}", f"{pose.position_std_m:.4f}"]
-            excluded = "; ".join(f"{k} {why}" for k, why in pose.excluded_landmarks.items())
-            row += [" ".join(pose.used_landmarks), excluded, pose.reason]
-            for landmark_id in ids:
-                track = record.tracks.get(landmark_id)
-                if track is None:
-                    row += ["nan"] * 6
-                else:
-                    row += [f"{v:.2f}" for v in track.box]
-                    row += [f"{track.peak_score:.4f}", int(track.aberrant)]
-                row.append(f"{pose.reprojection_errors.get(landmark_id, math.nan):.3f}")
-            writer.writerow(row)
+    return header
 
 
-# ---------------------------------------------------------------------------------------------
-# autotrack synth
-
-
-def _add_synth(subparsers: argparse._SubParsersAction) -> None:
-    parser = subparsers.add_parser(
-        "synth",
-        help="render the synthetic localisation test bed (sequences with exact ground truth)",
-        description=(
-            "Render synthetic indoor sequences like the paper's localisation experiment: four "
-            "landmarks, a moving 1280x720 camera at 10 fps, lighting changes, noise and motion "
-            "blur, with exact camera poses, intrinsics and landmark boxes. Each sequence gets a "
-            "folder OUT_DIR/<name>/ with img/, scene.json, boxes.json, poses_gt.tum, "
-            "groundtruth/<landmark>.txt and sequence.json."
-        ),
-    )
-    parser.add_argument("out_dir", type=Path, help="folder to write the sequences into")
-    parser.add_argument("--sequences", type=int, default=6, help="how many (default 6)")
-    parser.add_argument(
-        "--frames",
-        type=int,
-        default=None,
-        help="frames per sequence (default: the paper's 652, 431, 400, 381, 352, 450)",
-    )
-    parser.add_argument("--seed", type=int, default=0, help="seed of everything random")
-    parser.add_argument(
-        "--width", type=int, default=1280, help="image width, 16:9 (default 1280, as the paper)"
-    )
-    parser.add_argument("--jpeg-quality", type=int, default=90, help="JPEG quality (default 90)")
-    parser.add_argument(
-        "--demo",
-        action="store_true",
-        help=(
-            "write the app's embedded demo instead: one short sequence straight into OUT_DIR "
-            "(60 frames, 960x540, JPEG quality 60)"
-        ),
-    )
-    parser.add_argument("--quiet", action="store_true", help="no progress bar")
-    parser.set_defaults(func=run_synth)
-
-
-def run_synth(args: argparse.Namespace) -> int:
-    from autotrack.synthetic import (
-        RenderSettings,
-        generate_demo,
-        generate_test_bed,
-        sequence_specs,
-    )
-
-    if args.width < 64 or args.width % 16:
-        raise InputError("--width must be a multiple of 16, at least 64 (16:9 images)")
-    if not 1 <= args.jpeg_quality <= 100:
-        raise InputError("--jpeg-quality must be between 1 and 100")
-    if args.demo:
-        spec = generate_demo(args.out_dir, seed=args.seed)
-        print(f"demo written to {args.out_dir} ({spec.frames} frames, {spec.trajectory})")
-        return 0
-    settings = RenderSettings(
-        width=args.width, height=args.width * 9 // 16, jpeg_quality=args.jpeg_quality
-    )
-    specs = sequence_specs(args.sequences, args.frames, args.seed, settings)
-    total = sum(spec.frames for spec in specs)
-    with tqdm(total=total, unit="frame", desc="rendering", disable=args.quiet) as progress:
-        folders = generate_test_bed(args.out_dir, specs, progress.update)
-    for folder, spec in zip(folders, specs, strict=True):
-        print(f"{folder}  {spec.trajectory}  {spec.frames} frames")
-    return 0
+def _tracks_rows(
+    records: Sequence[FrameOutcome], timestamps: np.ndarray, scene: Scene
+) -> Iterator[list[Any]]:
+    for record, stamp in zip(records, timestamps, strict=True):
+        pose = record.pose
+        row: list[Any] = [record.frame_index, f"{stamp:.6f}", int(pose.valid)]
+        row += [f"{v:.6f}" for v in pose.position]
+        row += [f"{v:.6f}" for v in pose.quaternion_xyzw()]
+        row += [f"{pose.rms_error_px:.3f}", f"{pose.position_std_m:.4f}"]
+        excluded = "; ".join(f"{k} {why}" for k, why in pose.excluded_landmarks.items())
+        row += [" ".join(pose.used_landmarks), excluded, pose.reason]
+        tracks = record.landmark_tracks
+        for landmark_id in scene.landmark_ids:
+            track = tracks.get(landmark_id)
+            if track is None:
+                row += ["nan"] * 6
+            else:
+                row += [f"{v:.2f}" for v in track.box]
+                row += [f"{track.peak_score:.4f}", int(track.aberrant)]
+            row.append(f"{pose.reprojection_errors.get(landmark_id, math.nan):.3f}")
+        yield row

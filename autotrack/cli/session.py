@@ -48,6 +48,31 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     export.add_argument("--tracks", type=Path, default=None, help="folder for <target>.txt files")
     export.add_argument("--poses", type=Path, default=None, help="TUM trajectory file to write")
     export.add_argument("--csv", type=Path, default=None, help="combined CSV file to write")
+    export.add_argument("--mot", type=Path, default=None, help="MOT Challenge file to write")
+    export.add_argument(
+        "--cvat", type=Path, default=None, help="CVAT for video 1.1 XML file to write"
+    )
+    export.add_argument(
+        "--cvat-all-keyframes",
+        action="store_true",
+        help="mark every box a keyframe (CVAT keeps only keyframes on import)",
+    )
+    export.add_argument(
+        "--frame-size",
+        type=str,
+        default=None,
+        metavar="WxH",
+        help="frame size for --cvat when the session's source is not readable here",
+    )
+    export.add_argument(
+        "--evo", action="store_true", help="print evo's APE command for --poses against --gt"
+    )
+    export.add_argument(
+        "--gt",
+        type=Path,
+        default=None,
+        help="ground-truth TUM for --evo (default: SOURCE/poses_gt.tum)",
+    )
     export.add_argument("--force", action="store_true", help="replace existing output files")
     export.set_defaults(func=run_export)
 
@@ -143,9 +168,23 @@ def run_info(args: argparse.Namespace) -> int:
 
 
 def run_export(args: argparse.Namespace) -> int:
-    if args.tracks is None and args.poses is None and args.csv is None:
-        raise SessionError("nothing to export: give --tracks DIR, --poses FILE and/or --csv FILE")
+    if not any(getattr(args, name) for name in ("tracks", "poses", "csv", "mot", "cvat")):
+        raise SessionError(
+            "nothing to export: give --tracks DIR, --poses FILE, --csv FILE, --mot FILE "
+            "and/or --cvat FILE"
+        )
+    if args.evo and args.poses is None:
+        raise SessionError("--evo prints the command for the exported poses: give --poses FILE")
     session = open_session(args.file)
+    if args.cvat is not None:  # before writing anything: the frame size CVAT needs
+        from autotrack.sessions.exports import session_frame_size
+
+        args.frame_size = _frame_size(args.frame_size) or session_frame_size(session)
+        if args.frame_size is None:
+            raise SessionError(
+                f"the session's source {session.metadata.get('source')} cannot be read here "
+                "to get the frame size CVAT needs: give --frame-size WIDTHxHEIGHT"
+            )
     if session.truncated:
         print(f"note: {args.file} was cut short; exporting what was recorded before the cut")
     if args.tracks is not None:
@@ -157,4 +196,42 @@ def run_export(args: argparse.Namespace) -> int:
     if args.poses is not None:
         count = write_tum_poses(session, args.poses, overwrite=args.force)
         print(f"wrote {count} valid pose(s) to {args.poses}")
+    _export_interchange(session, args)
     return 0
+
+
+def _frame_size(text: str | None) -> tuple[int, int] | None:
+    """'1280x720' -> (1280, 720); SessionError for anything else."""
+    if text is None:
+        return None
+    width, _, height = text.lower().partition("x")
+    if not (width.isdigit() and height.isdigit() and int(width) > 0 and int(height) > 0):
+        raise SessionError(
+            f"--frame-size must be WIDTHxHEIGHT in pixels (e.g. 1280x720), got {text!r}"
+        )
+    return (int(width), int(height))
+
+
+def _export_interchange(session: Session, args: argparse.Namespace) -> None:
+    """--mot, --cvat and --evo (autotrack.sessions.exports)."""
+    from autotrack.sessions.exports import (
+        evo_ape_command,
+        export_session_cvat,
+        export_session_mot,
+    )
+
+    if args.mot is not None:
+        ids = export_session_mot(session, args.mot, overwrite=args.force)
+        mapping = ", ".join(f"{target}={number}" for target, number in ids.items())
+        print(f"wrote {args.mot} (MOT ids: {mapping})")
+    if args.cvat is not None:
+        export_session_cvat(
+            session,
+            args.cvat,
+            overwrite=args.force,
+            all_keyframes=args.cvat_all_keyframes,
+            frame_size=args.frame_size,
+        )
+        print(f"wrote {args.cvat} (CVAT for video 1.1)")
+    if args.evo:
+        print(evo_ape_command(session, args.poses, args.gt))

@@ -4,16 +4,18 @@ from __future__ import annotations
 
 import argparse
 import sys
-import time
 from pathlib import Path
 
 import numpy as np
 from tqdm import tqdm
 
-from autotrack.datasets import GROUND_TRUTH_FILE, read_boxes, write_boxes
+from autotrack.cli.live import add_live_arguments, check_source, run_track_live
 from autotrack.errors import BoxError, InputError
-from autotrack.evaluation import score_sequence
-from autotrack.frames import open_frames
+from autotrack.evaluation.datasets import GROUND_TRUTH_FILE
+from autotrack.evaluation.metrics import score_sequence
+from autotrack.io.frames import open_frames
+from autotrack.io.live import source_argument
+from autotrack.io.otb_boxes import read_boxes, write_boxes
 from autotrack.params import PRESETS, preset
 
 
@@ -39,7 +41,12 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
             "benchmarks' 1-based pixel convention, for --init and for the output alike."
         ),
     )
-    parser.add_argument("sequence", type=Path, help="folder of images, video, or sequence folder")
+    parser.add_argument(
+        "sequence",
+        type=source_argument,
+        help="folder of images, video, or sequence folder; with --realtime a camera index, "
+        "stream URL or video",
+    )
     parser.add_argument(
         "--init",
         type=str,
@@ -57,6 +64,10 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     )
     parser.add_argument("--out", type=Path, default=None, help="write boxes here (x,y,w,h rows)")
     parser.add_argument("--quiet", action="store_true", help="no progress bar")
+    add_live_arguments(parser)
+    parser.add_argument(
+        "--fps", type=float, default=None, help="with --realtime: play a video at this rate"
+    )
     parser.set_defaults(func=run)
 
 
@@ -66,10 +77,14 @@ def _ground_truth(sequence: Path) -> np.ndarray | None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from autotrack.tracker import AutoTrack
+    from autotrack.pipeline import Pipeline
 
     if args.colour_table is not None and not args.colour_table.is_file():
         raise InputError(f"Color Names table not found: {args.colour_table}")
+    check_source(args)
+    if args.realtime:
+        init_box = None if args.init is None else np.array(parse_box(args.init)) - [1, 1, 0, 0]
+        return run_track_live(args, preset(args.preset, args.colour_table), init_box)
     frames = open_frames(args.sequence)
     ground_truth = _ground_truth(args.sequence)
     if args.init is not None:
@@ -80,20 +95,16 @@ def run(args: argparse.Namespace) -> int:
         raise InputError(
             f"{args.sequence} has no {GROUND_TRUTH_FILE}: give the initial box with --init x,y,w,h"
         )
-    tracker = AutoTrack(preset(args.preset, args.colour_table))
     boxes = np.full((len(frames), 4), np.nan)
-    tracking_seconds = 0.0
     progress = tqdm(
         total=len(frames), unit="frame", desc=frames.name, disable=args.quiet or len(frames) < 50
     )
-    with frames, progress:
-        for index in range(len(frames)):
-            frame = frames.read(index)
-            start = time.perf_counter()
-            result = tracker.init(frame, init_box) if index == 0 else tracker.update(frame)
-            tracking_seconds += time.perf_counter() - start
-            boxes[index] = result.box
+    with frames, progress, Pipeline(frames, preset(args.preset, args.colour_table)) as pipeline:
+        target_id = pipeline.add_target(0, tuple(init_box), landmark_id=None)
+        for outcome in pipeline.run():
+            boxes[outcome.frame_index] = outcome.tracks[target_id].box
             progress.update()
+        tracking_seconds = float(np.nansum(pipeline.frame_seconds))
     if args.out is not None:
         args.out.parent.mkdir(parents=True, exist_ok=True)
         write_boxes(args.out, boxes)

@@ -1,0 +1,160 @@
+"""`autotrack app [SEQUENCE]`: the browser app (viser) to annotate, track and debug.
+
+The library's `autotrack` command finds this sub-command through the `autotrack.commands`
+entry-point group (pyproject.toml), so the library never imports the app.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import shutil
+import signal
+import threading
+from dataclasses import replace
+from pathlib import Path
+
+from app.config import AppConfig
+from autotrack.errors import InputError
+from autotrack.params import PRESETS
+
+LOOPBACK_HOSTS = ("127.0.0.1", "localhost", "::1")
+
+
+def add_parser(subparsers: argparse._SubParsersAction) -> None:
+    """Add `autotrack app` to the `autotrack` command line."""
+    parser = subparsers.add_parser(
+        "app",
+        help="open the browser app: draw boxes, watch AutoTrack, see the camera trajectory",
+        description=(
+            "Start the AutoTrack Studio web app (viser) and print its URL. Without SEQUENCE it "
+            "opens the embedded demo (four landmarks, a scene and its ground-truth trajectory). "
+            "Browser users may only open sequences and scenes under SEQUENCE's folder, the "
+            "--allow-root folders, the demo and their own uploads."
+        ),
+    )
+    parser.add_argument(
+        "sequence",
+        type=Path,
+        nargs="?",
+        default=None,
+        help="folder of images, video, or benchmark sequence folder (default: the demo)",
+    )
+    parser.add_argument("--scene", type=Path, default=None, help="scene file for SEQUENCE")
+    parser.add_argument(
+        "--host",
+        default="127.0.0.1",
+        help="interface to listen on (default 127.0.0.1: this machine only; 0.0.0.0: everyone)",
+    )
+    parser.add_argument("--port", type=int, default=8080, help="port to try first (default 8080)")
+    parser.add_argument(
+        "--sessions",
+        type=Path,
+        default=Path("sessions"),
+        help="folder for session recordings and uploads (default ./sessions)",
+    )
+    parser.add_argument(
+        "--allow-root",
+        dest="allow_roots",
+        type=Path,
+        action="append",
+        default=[],
+        metavar="DIR",
+        help="a folder whose sequences browser users may open (repeatable)",
+    )
+    parser.add_argument(
+        "--preset", default="autotrack", choices=sorted(PRESETS), help="tracker preset"
+    )
+    parser.add_argument(
+        "--canvas-fps",
+        type=float,
+        default=5.0,
+        help="initial cap on frames/s drawn on the 3-D canvas (software WebGL is slow)",
+    )
+    parser.set_defaults(func=run)
+
+
+def startup_roots(sequence: Path | None, scene: Path | None, allow_roots: list[Path]) -> list[Path]:
+    """The folders a browser may open: the --allow-root folders plus the folders holding the
+    start-up sequence and scene. Each must exist."""
+    roots: list[Path] = []
+    for root in allow_roots:
+        if not root.is_dir():
+            raise InputError(f"--allow-root {root} is not an existing folder")
+        roots.append(root.resolve())
+    if sequence is not None:
+        if not sequence.exists():
+            raise InputError(f"no such sequence: {sequence}")
+        roots.append(sequence.resolve() if sequence.is_dir() else sequence.resolve().parent)
+    if scene is not None:
+        if not scene.is_file():
+            raise InputError(f"no such scene file: {scene}")
+        roots.append(scene.resolve().parent)
+    return roots
+
+
+def rendered_demo() -> Path:
+    """The demo rendered into the user's cache folder (installs without the repo's static/).
+
+    The renderer is deterministic, so this is the same sequence as static/demo; it is rendered
+    once (a few seconds) and reused.
+    """
+    from autotrack.synthetic.testbed import generate_demo
+
+    cache = Path(os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache")
+    demo = cache / "autotrack-studio" / "demo"
+    if not (demo / "scene.json").is_file():
+        print(f"rendering the demo into {demo} (first launch only)...", flush=True)
+        partial = demo.with_name("demo.partial")
+        shutil.rmtree(partial, ignore_errors=True)
+        try:
+            generate_demo(partial)
+            shutil.rmtree(demo, ignore_errors=True)
+            partial.rename(demo)
+        except OSError as error:
+            raise InputError(
+                f"the embedded demo is missing and cannot be rendered into {demo}: {error}; "
+                "give a SEQUENCE to open"
+            ) from error
+    return demo
+
+
+def run(args: argparse.Namespace) -> int:
+    """Start the app and serve until Ctrl-C or SIGTERM."""
+    if not 0 <= args.port <= 65535:
+        raise InputError(f"--port must be 0..65535, got {args.port}")
+    if not args.canvas_fps > 0:
+        raise InputError(f"--canvas-fps must be positive, got {args.canvas_fps}")
+    roots = startup_roots(args.sequence, args.scene, args.allow_roots)
+
+    from app.server import StudioServer  # viser loads only when the app starts
+
+    config = AppConfig(
+        sequence=None if args.sequence is None else args.sequence.resolve(),
+        scene=None if args.scene is None else args.scene.resolve(),
+        host=args.host,
+        port=args.port,
+        sessions_dir=args.sessions,
+        allowed_roots=tuple(roots),
+        tracker_preset=args.preset,
+        canvas_fps=args.canvas_fps,
+    )
+    if config.sequence is None and not config.demo_dir.is_dir():
+        config = replace(config, demo_dir=rendered_demo())
+    studio = StudioServer(config)
+    print(f"AutoTrack Studio: {studio.url}", flush=True)
+    if args.host not in LOOPBACK_HOSTS:
+        print(
+            f"listening on {args.host}: other machines can reach this app; "
+            "they can open only the allowed folders",
+            flush=True,
+        )
+    print(f"sessions are recorded in {config.sessions_dir.resolve()}; Ctrl-C stops", flush=True)
+    stopped = threading.Event()
+    # A service manager's SIGTERM also closes the tabs, so every recording is finished.
+    signal.signal(signal.SIGTERM, lambda _signum, _frame: stopped.set())
+    try:
+        stopped.wait()
+    finally:
+        studio.stop()
+    return 0

@@ -1,0 +1,51 @@
+"""How the app server was started, and the folders a browser may open things from."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from app.paths import UploadLimits, normalise_roots
+
+DEMO_DIR = Path(__file__).resolve().parents[1] / "static" / "demo"
+"""The embedded demo sequence (img/, scene.json, boxes.json, poses_gt.tum)."""
+
+
+@dataclass(frozen=True)
+class AppConfig:
+    """How the app server was started."""
+
+    sequence: Path | None = None
+    """Sequence each new tab opens (None: the embedded demo)."""
+    scene: Path | None = None
+    """Scene file for `sequence` (None: a scene.json beside the sequence, if any)."""
+    host: str = "127.0.0.1"
+    """Interface to bind; 127.0.0.1 keeps the app local to this machine."""
+    port: int = 8080
+    """Port to try first (viser moves on to the next free one)."""
+    sessions_dir: Path = Path("sessions")
+    """Where session recordings (and uploads, under uploads/) are written."""
+    allowed_roots: tuple[Path, ...] = ()
+    """Folders a browser user may open sequences and scenes from (plus the demo and uploads)."""
+    demo_dir: Path = DEMO_DIR
+    """The embedded demo."""
+    tracker_preset: str = "autotrack"
+    """Tracker preset of new runs (autotrack, strcf, strcf+asr, strcf+atr, autotrack+)."""
+    tracker_threads: int = 2
+    """Threads each multi-target tracker may use."""
+    canvas_fps: float = 5.0
+    """Initial cap on frames per second sent to the 3-D canvas background (software WebGL
+    draws only a few per second; the GUI video panel is not capped)."""
+    upload_limits: UploadLimits = field(default_factory=UploadLimits)
+    """Bounds on uploads."""
+
+    @property
+    def upload_dir(self) -> Path:
+        """Folder receiving uploaded videos and unpacked zips."""
+        return self.sessions_dir / "uploads"
+
+    def browsable_roots(self) -> tuple[Path, ...]:
+        """Every folder a tab may open things from: the allowed roots, the demo, the uploads."""
+        self.upload_dir.mkdir(parents=True, exist_ok=True)
+        extra = [root for root in (self.demo_dir, self.upload_dir) if root.is_dir()]
+        return normalise_roots([*self.allowed_roots, *extra])

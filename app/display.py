@@ -1,0 +1,299 @@
+"""A tab's display thread: turns the latest `FrameView` into what the browser gets.
+
+The worker publishes a view per frame; this thread sends the video panel (JPEG, every view up
+to `GUI_FPS`), the 3-D canvas background (letterboxed, capped at the user's canvas rate because
+software WebGL draws only a few per second), and the status, plots, map panels and 3-D view
+(`SLOW_FPS`). Views it had no time for are skipped, so a slow browser never slows tracking.
+"""
+
+from __future__ import annotations
+
+import sys
+import threading
+import time
+import traceback
+from collections import deque
+from dataclasses import dataclass, field
+
+import numpy as np
+import viser
+
+from app.canvas import (
+    Letterbox,
+    draw_overlays,
+    fit_letterbox,
+    letterbox_image,
+    map_panel,
+    thumbnail,
+)
+from app.channel import ClientChannel
+from app.panels import CANVAS_3D, CANVAS_FRAME, MAP_KINDS, MAPS_PANELS, Panels
+from app.plots import SignalPlots
+from app.view3d import SceneView
+from app.views import FrameView
+
+GUI_FPS = 30.0
+"""Most video-panel updates per second (viser keeps only the latest anyway)."""
+SLOW_FPS = 5.0
+"""Most status, plot, map-panel and 3-D updates per second."""
+VIDEO_MAX_WIDTH = 640
+"""Largest width of the video-panel image (pixels): the panel is narrow, and drawing on a
+smaller image leaves the CPU to the tracker."""
+CANVAS_MAX_WIDTH = 1280
+"""Largest width of the letterboxed canvas background (pixels)."""
+DEFAULT_CANVAS_SIZE = (1280, 720)
+"""Canvas size assumed until the browser reports one."""
+TIMES_KEPT = 2000
+"""Send times kept per kind for measuring display rates."""
+MAP_PANEL_GAP = np.full((160, 4, 3), 255, np.uint8)
+"""White strip between the response and the local-variation map of a map panel."""
+
+
+@dataclass
+class DisplayStats:
+    """What the display thread sent (counts since the tab opened, for tests and figures)."""
+
+    views_published: int = 0
+    video_frames: int = 0
+    canvas_frames: int = 0
+    overlay_maps: int = 0
+    """Video frames sent with a map drawn over a search region."""
+    map_panel_updates: int = 0
+    plot_updates: int = 0
+    scene_updates: int = 0
+    canvas_times: deque[float] = field(default_factory=lambda: deque(maxlen=TIMES_KEPT))
+    """Send times (time.monotonic) of the latest canvas frames."""
+    video_times: deque[float] = field(default_factory=lambda: deque(maxlen=TIMES_KEPT))
+    """Send times of the latest video-panel frames."""
+
+
+def map_panel_image(view: FrameView, target_id: str) -> np.ndarray:
+    """A target's map panel: its response map and local-variation map side by side."""
+    result = view.drawings[target_id].result
+    response = None if result is None else result.response_map
+    variation = None if result is None else result.local_variation
+    return np.concatenate([map_panel(response), MAP_PANEL_GAP, map_panel(variation)], axis=1)
+
+
+class MapPanels:
+    """One image per target with its maps, in the Display panel's Maps folder."""
+
+    def __init__(self, gui: viser.GuiApi, folder: viser.GuiFolderHandle) -> None:
+        self.gui = gui
+        self.folder = folder
+        self._images: dict[str, viser.GuiImageHandle] = {}
+
+    def shown(self) -> dict[str, np.ndarray]:
+        """Target id -> the image its panel shows now."""
+        return {target_id: handle.image for target_id, handle in self._images.items()}
+
+    def update(self, view: FrameView, shown: bool) -> int:
+        """Show (or, when not `shown`, remove) the panels of the view's targets; returns how
+        many panels were sent."""
+        for target_id in [t for t in self._images if t not in view.drawings or not shown]:
+            self._images.pop(target_id).remove()
+        if not shown:
+            return 0
+        for target_id in view.drawings:
+            image = map_panel_image(view, target_id)
+            handle = self._images.get(target_id)
+            if handle is None:
+                with self.folder:
+                    self._images[target_id] = self.gui.add_image(
+                        image, label=f"{target_id}: response | local variation", format="png"
+                    )
+            else:
+                handle.image = image
+        return len(view.drawings)
+
+
+def picture(view: FrameView, maps: str, max_width: int | None) -> np.ndarray:
+    """The view's frame with boxes, labels, peaks and the chosen map drawn."""
+    kind = MAP_KINDS.get(maps, "none")
+    return draw_overlays(view.frame, list(view.drawings.values()), kind, max_width)
+
+
+class DisplayLoop:
+    """The display thread of one tab (see the module docstring)."""
+
+    def __init__(
+        self,
+        panels: Panels,
+        gui: viser.GuiApi,
+        scene_api: viser.SceneApi,
+        channel: ClientChannel,
+        *,
+        name: str,
+    ) -> None:
+        self.panels = panels
+        self.scene_api = scene_api
+        self.channel = channel
+        self.plots = SignalPlots(gui)
+        self.view3d = SceneView(scene_api)
+        self.map_panels = MapPanels(gui, panels.display.maps_folder)
+        self.stats = DisplayStats()
+        self.letterbox: Letterbox | None = None
+        """How the last canvas background placed the frame (maps rect-selects to pixels)."""
+        self._lock = threading.Condition()
+        self._view: FrameView | None = None
+        self._version = 0
+        self._canvas_dirty = True
+        self._closed = False
+        self._thread = threading.Thread(target=self._loop, name=name, daemon=True)
+        self._thread.start()
+
+    def publish(self, view: FrameView) -> None:
+        """Show `view` next (replacing any view not shown yet)."""
+        with self._lock:
+            self._view = view
+            self._version += 1
+            self.stats.views_published += 1
+            self._lock.notify_all()
+
+    def wake(self, *, canvas: bool = False) -> None:
+        """Look at the settings again (`canvas`: send the canvas background again)."""
+        with self._lock:
+            self._canvas_dirty = self._canvas_dirty or canvas
+            self._lock.notify_all()
+
+    def canvas_letterbox(self, frame_size: tuple[int, int]) -> Letterbox:
+        """How the canvas shows (or will show) a frame of `frame_size` (width, height)."""
+        letterbox = self.letterbox
+        if letterbox is None or (letterbox.frame_width, letterbox.frame_height) != frame_size:
+            # The canvas still shows another sequence's frame: map as the next one will show.
+            letterbox = fit_letterbox(frame_size, self.channel.canvas_size() or DEFAULT_CANVAS_SIZE)
+        return letterbox
+
+    def canvas_resized(self) -> None:
+        """The browser's canvas changed: resend the background if its letterbox changed."""
+        size = self.channel.canvas_size()
+        letterbox = self.letterbox
+        if letterbox is None or size is None:
+            return
+        if fit_letterbox((letterbox.frame_width, letterbox.frame_height), size) != letterbox:
+            self.wake(canvas=True)
+
+    def close(self, timeout: float = 10.0) -> None:
+        """Stop the thread and remove the 3-D scene."""
+        with self._lock:
+            self._closed = True
+            self._lock.notify_all()
+        self._thread.join(timeout=timeout)
+        self.view3d.clear()
+
+    # -- the thread ---------------------------------------------------------------------------
+
+    def _loop(self) -> None:
+        shown = {"video": -1, "canvas": -1, "slow": -1}
+        last = {"video": 0.0, "canvas": 0.0, "slow": 0.0}
+        mode_shown: str | None = None
+        while True:
+            woken = self._wait(shown, last, mode_shown)
+            if woken is None:
+                return
+            view, version, mode, now = woken
+            try:
+                if mode != mode_shown:
+                    self._show_canvas_mode(mode)
+                    mode_shown = mode
+                if view is not None:
+                    self._send_due(view, version, mode, now, shown, last)
+            except Exception:  # the display must keep running whatever one view contained
+                traceback.print_exc(file=sys.stderr)
+                shown = dict.fromkeys(shown, version)
+                last = dict.fromkeys(last, time.monotonic())
+                self._canvas_dirty = False
+
+    def _canvas_period(self) -> float:
+        return 1.0 / max(1.0, float(self.panels.display.canvas_fps.value))
+
+    def _wait(
+        self, shown: dict[str, int], last: dict[str, float], mode_shown: str | None
+    ) -> tuple[FrameView | None, int, str, float] | None:
+        """Sleep until something is due; (view, its version, canvas mode, now), None when
+        closed."""
+        with self._lock:
+            while True:
+                if self._closed:
+                    return None
+                view, version, now = self._view, self._version, time.monotonic()
+                mode = self.panels.display.canvas.value
+                due: list[float] = []
+                if view is not None and version != shown["video"]:
+                    due.append(last["video"] + 1.0 / GUI_FPS)
+                if view is not None and version != shown["slow"]:
+                    due.append(last["slow"] + 1.0 / SLOW_FPS)
+                if (
+                    view is not None
+                    and mode == CANVAS_FRAME
+                    and (version != shown["canvas"] or self._canvas_dirty)
+                ):
+                    due.append(last["canvas"] + self._canvas_period())
+                if mode != mode_shown:
+                    due.append(now)
+                if due and min(due) <= now:
+                    return view, version, mode, now
+                self._lock.wait(None if not due else min(due) - now)
+
+    def _send_due(
+        self,
+        view: FrameView,
+        version: int,
+        mode: str,
+        now: float,
+        shown: dict[str, int],
+        last: dict[str, float],
+    ) -> None:
+        maps = self.panels.display.maps.value
+        if version != shown["video"] and now >= last["video"] + 1.0 / GUI_FPS:
+            self.panels.video.image = picture(view, maps, VIDEO_MAX_WIDTH)
+            self.stats.video_frames += 1
+            self.stats.video_times.append(now)
+            if maps in MAP_KINDS and any(
+                drawing.result is not None and drawing.result.response_map is not None
+                for drawing in view.drawings.values()
+            ):
+                self.stats.overlay_maps += 1
+            shown["video"], last["video"] = version, now
+        if (
+            mode == CANVAS_FRAME
+            and (version != shown["canvas"] or self._canvas_dirty)
+            and now >= last["canvas"] + self._canvas_period()
+        ):
+            self._send_canvas(view, maps)
+            shown["canvas"], last["canvas"] = version, now
+        if version != shown["slow"] and now >= last["slow"] + 1.0 / SLOW_FPS:
+            self._send_slow(view, maps)
+            shown["slow"], last["slow"] = version, now
+
+    def _send_canvas(self, view: FrameView, maps: str) -> None:
+        size = self.channel.canvas_size() or DEFAULT_CANVAS_SIZE
+        height, width = view.frame.shape[:2]
+        letterbox = fit_letterbox((width, height), size)
+        # Drawn at full size and padded in frame pixels, then scaled as a whole: canvas
+        # fractions map to frame pixels exactly through `letterbox`.
+        image = letterbox_image(
+            picture(view, maps, None), letterbox, min(CANVAS_MAX_WIDTH, max(size[0], 320))
+        )
+        self.scene_api.set_background_image(image, format="jpeg", jpeg_quality=80)
+        self.letterbox = letterbox
+        self._canvas_dirty = False
+        self.stats.canvas_frames += 1
+        self.stats.canvas_times.append(time.monotonic())
+
+    def _show_canvas_mode(self, mode: str) -> None:
+        if mode == CANVAS_3D:
+            self.scene_api.set_background_image(None)
+            self.scene_api.set_global_visibility(True)
+        else:
+            self.scene_api.set_global_visibility(False)
+            self._canvas_dirty = True
+
+    def _send_slow(self, view: FrameView, maps: str) -> None:
+        self.panels.quiet.set(self.panels.status, "content", view.status)
+        self.plots.update(view.history)
+        self.stats.plot_updates += 1
+        if view.pose_view is not None:
+            self.view3d.update(view.pose_view, thumbnail(view.frame))
+            self.stats.scene_updates += 1
+        self.stats.map_panel_updates += self.map_panels.update(view, maps == MAPS_PANELS)

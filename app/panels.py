@@ -1,0 +1,314 @@
+"""A tab's GUI: flat `gui.add_*` calls, one small function per folder, and `show_state`, which
+writes the controller's state back into the widgets after each command.
+
+No callbacks and no state here: app/tab.py connects each widget to a controller command, and
+the controller (app/controller.py) holds the state.
+"""
+
+from __future__ import annotations
+
+import threading
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+import viser
+
+from app.config import AppConfig
+from app.controller import TabController, format_box
+from autotrack.params import PRESETS
+
+NEW_TARGET = "new target"
+NO_LANDMARK = "none"
+NO_CHOICE = "(none)"
+CANVAS_FRAME = "frame (shift-drag draws a box)"
+CANVAS_3D = "3-D view"
+MAPS_OFF = "off"
+MAPS_RESPONSE = "response map on frame"
+MAPS_VARIATION = "local variation on frame"
+MAPS_PANELS = "panels (per target)"
+MAP_KINDS = {MAPS_RESPONSE: "response", MAPS_VARIATION: "local_variation"}
+"""Maps choice -> the map `draw_overlays` blends over the frame."""
+
+
+class QuietWrites:
+    """Writes to widgets that do not fire this tab's own on_update callbacks."""
+
+    def __init__(self) -> None:
+        self._local = threading.local()
+
+    def set(self, handle: Any, attribute: str, value: Any) -> None:
+        """`handle.attribute = value`, without triggering the callbacks wrapped by `user_edit`."""
+        self._local.active = True
+        try:
+            setattr(handle, attribute, value)
+        finally:
+            self._local.active = False
+
+    def set_options(self, dropdown: viser.GuiDropdownHandle, options: tuple[str, ...]) -> None:
+        """A dropdown's options, sent only when they changed."""
+        if tuple(dropdown.options) != options:
+            self.set(dropdown, "options", options)
+
+    def user_edit(self, callback: Callable[[], None]) -> Callable[[Any], None]:
+        """An on_update callback that runs `callback` unless the app itself wrote the value."""
+
+        def on_update(_event: Any) -> None:
+            if not getattr(self._local, "active", False):
+                callback()
+
+        return on_update
+
+
+@dataclass
+class SequencePanel:
+    """The Sequence folder: pick, type or upload a sequence, its scene and the tracker."""
+
+    dropdown: viser.GuiDropdownHandle
+    open_listed: viser.GuiButtonHandle
+    refresh: viser.GuiButtonHandle
+    path: viser.GuiTextHandle
+    open_path: viser.GuiButtonHandle
+    scene: viser.GuiTextHandle
+    use_scene: viser.GuiButtonHandle
+    preset: viser.GuiDropdownHandle
+    upload: viser.GuiUploadButtonHandle
+
+
+def _sequence_panel(gui: viser.GuiApi, config: AppConfig) -> SequencePanel:
+    with gui.add_folder("Sequence", expand_by_default=False):
+        return SequencePanel(
+            dropdown=gui.add_dropdown("Sequences", options=(NO_CHOICE,)),
+            open_listed=gui.add_button("Open selected sequence"),
+            refresh=gui.add_button("Refresh list"),
+            path=gui.add_text("Path", initial_value=""),
+            open_path=gui.add_button("Open path"),
+            scene=gui.add_text("Scene file", initial_value=""),
+            use_scene=gui.add_button("Use scene file (reopens)"),
+            preset=gui.add_dropdown(
+                "Tracker", options=tuple(PRESETS), initial_value=config.tracker_preset
+            ),
+            upload=gui.add_upload_button(
+                "Upload video or zip of images", mime_type="video/*,.zip,application/zip"
+            ),
+        )
+
+
+@dataclass
+class TargetsPanel:
+    """The Targets folder: the table, which target a drag draws, its landmark, typed box."""
+
+    table: viser.GuiMarkdownHandle
+    draw: viser.GuiDropdownHandle
+    landmark: viser.GuiDropdownHandle
+    box: viser.GuiTextHandle
+    apply_box: viser.GuiButtonHandle
+    delete: viser.GuiButtonHandle
+    boxes_json: viser.GuiButtonHandle
+
+
+def _targets_panel(gui: viser.GuiApi) -> TargetsPanel:
+    with gui.add_folder("Targets"):
+        return TargetsPanel(
+            table=gui.add_markdown("No targets yet."),
+            draw=gui.add_dropdown("Drag draws", options=(NEW_TARGET,), initial_value=NEW_TARGET),
+            landmark=gui.add_dropdown(
+                "Landmark", options=(NO_LANDMARK,), initial_value=NO_LANDMARK
+            ),
+            box=gui.add_text("Box x, y, w, h", initial_value=""),
+            apply_box=gui.add_button("Apply typed box"),
+            delete=gui.add_button("Delete target", color="red"),
+            boxes_json=gui.add_button("Load boxes.json", visible=False),
+        )
+
+
+@dataclass
+class PlaybackPanel:
+    """The Playback folder: play / pause, steps, the frame slider and the speed."""
+
+    play: viser.GuiButtonHandle
+    step_back: viser.GuiButtonHandle
+    step: viser.GuiButtonHandle
+    frame: viser.GuiSliderHandle
+    speed: viser.GuiSliderHandle
+    unlimited: viser.GuiCheckboxHandle
+
+    def frame_period(self) -> float:
+        """Seconds between played frames (0 when playing as fast as tracking goes)."""
+        return 0.0 if self.unlimited.value else 1.0 / max(1.0, float(self.speed.value))
+
+
+def _playback_panel(gui: viser.GuiApi) -> PlaybackPanel:
+    with gui.add_folder("Playback"):
+        return PlaybackPanel(
+            play=gui.add_button("Play", icon=viser.Icon.PLAYER_PLAY),
+            step_back=gui.add_button("Step back", icon=viser.Icon.PLAYER_SKIP_BACK),
+            step=gui.add_button("Step forward", icon=viser.Icon.PLAYER_SKIP_FORWARD),
+            frame=gui.add_slider("Frame", min=1, max=2, step=1, initial_value=1),
+            speed=gui.add_slider("Speed (frames/s)", min=1, max=60, step=1, initial_value=30),
+            unlimited=gui.add_checkbox("As fast as tracking goes", False),
+        )
+
+
+@dataclass
+class DisplayPanel:
+    """The Display folder: canvas mode, maps, canvas frame-rate cap (and the Maps folder)."""
+
+    canvas: viser.GuiDropdownHandle
+    maps: viser.GuiDropdownHandle
+    canvas_fps: viser.GuiSliderHandle
+    maps_folder: viser.GuiFolderHandle
+    """Holds one image per target while `maps` is MAPS_PANELS (see app/display.py)."""
+
+
+def _display_panel(gui: viser.GuiApi, config: AppConfig) -> DisplayPanel:
+    with gui.add_folder("Display"):
+        canvas = gui.add_dropdown(
+            "Canvas", options=(CANVAS_FRAME, CANVAS_3D), initial_value=CANVAS_FRAME
+        )
+        maps = gui.add_dropdown(
+            "Maps",
+            options=(MAPS_OFF, MAPS_RESPONSE, MAPS_VARIATION, MAPS_PANELS),
+            initial_value=MAPS_RESPONSE,
+        )
+        canvas_fps = gui.add_slider(
+            "Canvas frames/s cap",
+            min=1,
+            max=30,
+            step=1,
+            initial_value=min(30, max(1, round(config.canvas_fps))),
+        )
+    return DisplayPanel(canvas, maps, canvas_fps, gui.add_folder("Maps", visible=False))
+
+
+@dataclass
+class SessionPanel:
+    """The Session folder: recording status, downloads, reopening a session."""
+
+    recording: viser.GuiMarkdownHandle
+    download_tracks: viser.GuiButtonHandle
+    download_poses: viser.GuiButtonHandle
+    download_mcap: viser.GuiButtonHandle
+    sessions: viser.GuiDropdownHandle
+    refresh: viser.GuiButtonHandle
+    reopen: viser.GuiButtonHandle
+
+
+def _session_panel(gui: viser.GuiApi) -> SessionPanel:
+    with gui.add_folder("Session", expand_by_default=False):
+        return SessionPanel(
+            recording=gui.add_markdown("Not recording yet (draw a box)."),
+            download_tracks=gui.add_button("Download tracks (zip)"),
+            download_poses=gui.add_button("Download poses (TUM)"),
+            download_mcap=gui.add_button("Download session (MCAP)"),
+            sessions=gui.add_dropdown("Sessions", options=(NO_CHOICE,)),
+            refresh=gui.add_button("Refresh sessions"),
+            reopen=gui.add_button("Reopen and continue"),
+        )
+
+
+@dataclass
+class Panels:
+    """Every widget of a tab, top to bottom (the plots are added after these)."""
+
+    status: viser.GuiMarkdownHandle
+    video: viser.GuiImageHandle
+    sequence: SequencePanel
+    targets: TargetsPanel
+    playback: PlaybackPanel
+    display: DisplayPanel
+    session: SessionPanel
+    quiet: QuietWrites
+
+
+def build_panels(gui: viser.GuiApi, config: AppConfig) -> Panels:
+    """A tab's widgets, in panel order."""
+    status = gui.add_markdown("Opening…")
+    video = gui.add_image(
+        np.zeros((90, 160, 3), np.uint8), label="Video", format="jpeg", jpeg_quality=80
+    )
+    return Panels(
+        status=status,
+        video=video,
+        sequence=_sequence_panel(gui, config),
+        targets=_targets_panel(gui),
+        playback=_playback_panel(gui),
+        display=_display_panel(gui, config),
+        session=_session_panel(gui),
+        quiet=QuietWrites(),
+    )
+
+
+def show_state(panels: Panels, controller: TabController) -> None:
+    """Write the controller's state into the widgets (after each command; see show_opened)."""
+    quiet = panels.quiet
+    run = controller.run
+    sequence = panels.sequence
+    quiet.set_options(sequence.dropdown, tuple(controller.sequence_choices) or (NO_CHOICE,))
+    show_targets(panels, controller)
+    show_frame(panels, controller)
+    show_playing(panels, controller.playing)
+    session = panels.session
+    quiet.set_options(session.sessions, tuple(controller.session_choices) or (NO_CHOICE,))
+    path = None if run is None else run.session_path
+    recording = "Not recording yet (draw a box)." if path is None else f"Recording to `{path.name}`"
+    quiet.set(session.recording, "content", recording)
+    if run is None:
+        quiet.set(panels.status, "content", controller.message)
+
+
+def show_opened(panels: Panels, controller: TabController) -> None:
+    """The opened sequence's path, scene file and length (only when one was opened, so that
+    a path being typed is not overwritten)."""
+    quiet, sequence = panels.quiet, panels.sequence
+    path, scene_path, run = controller.sequence_path, controller.scene_path, controller.run
+    quiet.set(sequence.path, "value", "" if path is None else str(path))
+    quiet.set(sequence.scene, "value", "" if scene_path is None else str(scene_path))
+    quiet.set(panels.playback.frame, "max", max(2, 0 if run is None else run.frame_count))
+
+
+def show_frame(panels: Panels, controller: TabController) -> None:
+    """The frame slider at the current frame (1-based)."""
+    panels.quiet.set(panels.playback.frame, "value", controller.cursor + 1)
+
+
+def show_playing(panels: Panels, playing: bool) -> None:
+    """The Play button as Pause while playing."""
+    play = panels.playback.play
+    label = "Pause" if playing else "Play"
+    if play.label != label:
+        panels.quiet.set(play, "label", label)
+        icon = viser.Icon.PLAYER_PAUSE if playing else viser.Icon.PLAYER_PLAY
+        panels.quiet.set(play, "icon", icon)
+
+
+def show_targets(panels: Panels, controller: TabController) -> None:
+    """The targets table, the target and landmark choosers, the typed box."""
+    quiet, widgets = panels.quiet, panels.targets
+    run = controller.run
+    targets = controller.targets()
+    quiet.set_options(widgets.draw, (NEW_TARGET, *(target.id for target in targets)))
+    quiet.set(widgets.draw, "value", controller.selected or NEW_TARGET)
+    landmarks = () if run is None or run.scene is None else run.scene.landmark_ids
+    quiet.set_options(widgets.landmark, (NO_LANDMARK, *landmarks))
+    chosen = controller.selected_target()
+    landmark = None if chosen is None else chosen.landmark_id
+    quiet.set(widgets.landmark, "value", landmark or NO_LANDMARK)
+    quiet.set(widgets.landmark, "disabled", chosen is None)
+    quiet.set(widgets.delete, "disabled", chosen is None)
+    quiet.set(widgets.boxes_json, "visible", controller.boxes_path is not None)
+    if chosen is not None and controller.cursor in chosen.results:
+        quiet.set(widgets.box, "value", format_box(chosen.results[controller.cursor].box))
+    if not targets:
+        text = "No targets yet. Shift-drag on the frame to draw one."
+    else:
+        rows = ["| target | landmark | box at this frame | tracked to |", "|---|---|---|---|"]
+        for target in targets:
+            result = target.results.get(controller.cursor)
+            box = "—" if result is None else format_box(result.box)
+            rows.append(
+                f"| {target.id} | {target.landmark_id or '—'} | {box} | {target.last_frame + 1} |"
+            )
+        text = "\n".join(rows)
+    quiet.set(widgets.table, "content", text)

@@ -1,0 +1,143 @@
+"""`--realtime` for `autotrack track` and `autotrack localize`: the live reader in the commands.
+
+Not a command of its own: `track` and `localize` add these options and hand over to
+`run_track_live` / `run_localize_live` when `--realtime` is given.
+"""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from tqdm import tqdm
+
+from autotrack.errors import InputError
+
+
+def add_live_arguments(parser: argparse.ArgumentParser) -> None:
+    """--realtime, --frame-log (and, for track, --fps) on a command's parser."""
+    parser.add_argument(
+        "--realtime",
+        action="store_true",
+        help="live input: SOURCE is a camera index, an rtsp:// or http:// stream, or a video "
+        "played at its frame rate; the tracker works on the newest frame and drops the rest",
+    )
+    parser.add_argument(
+        "--frame-log",
+        type=Path,
+        default=None,
+        metavar="CSV",
+        help="with --realtime: every captured frame's capture time, whether it was processed "
+        "or dropped, and its latency",
+    )
+
+
+def check_source(args: argparse.Namespace) -> None:
+    """Refuse camera indices and streams without --realtime, and --frame-log without it."""
+    from autotrack.io.live import describe_source, is_live_only
+
+    if not args.realtime and is_live_only(args.sequence):
+        raise InputError(f"{describe_source(args.sequence)} is live input: add --realtime")
+    if not args.realtime and args.frame_log is not None:
+        raise InputError("--frame-log records live runs: add --realtime")
+
+
+def _finish(summary: Any, frame_log: Path | None) -> None:
+    from autotrack.io.live import write_frame_log
+
+    print(summary.describe())
+    if frame_log is not None:
+        frame_log.parent.mkdir(parents=True, exist_ok=True)
+        write_frame_log(frame_log, summary)
+        print(f"frame log written to {frame_log}")
+
+
+def run_track_live(args: argparse.Namespace, params: Any, init_box: np.ndarray | None) -> int:
+    """`autotrack track SOURCE --realtime`: boxes of the processed frames, NaN rows for the
+    dropped ones, and the drop/latency report."""
+    from autotrack.io.live import LiveReader, describe_source
+    from autotrack.io.otb_boxes import write_boxes
+    from autotrack.pipeline.live import track_live, warm_up
+
+    if init_box is None:
+        raise InputError("live input has no ground truth: give the initial box with --init x,y,w,h")
+    reader = LiveReader(args.sequence, fps=args.fps)
+    warm_up(params, reader.frame_size, [init_box])
+    progress = tqdm(unit="frame", desc=describe_source(args.sequence), disable=args.quiet)
+    with reader, progress:
+        boxes, summary = track_live(
+            reader, params, init_box, on_result=lambda frame, outcome: progress.update()
+        )
+    if args.out is not None:
+        args.out.parent.mkdir(parents=True, exist_ok=True)
+        write_boxes(args.out, boxes)
+        print(f"boxes written to {args.out} (one row per captured frame, NaN where dropped)")
+    _finish(summary, args.frame_log)
+    return 0
+
+
+def _live_recording(args: argparse.Namespace, scene_path: Path) -> Any:
+    """The --session recording of a live run: the processed frames are embedded (JPEG), since
+    a live source cannot be replayed."""
+    if args.session is None:
+        return None
+    from autotrack.pipeline import Recording
+
+    return Recording(
+        source=str(args.sequence), path=args.session, scene_path=scene_path, embed_frames=True
+    )
+
+
+def run_localize_live(
+    args: argparse.Namespace,
+    *,
+    scene: Any,
+    scene_path: Path,
+    init: Any,
+    tracker_params: Any,
+    localizer_params: Any,
+    gt: Any,
+) -> int:
+    """`autotrack localize SOURCE --realtime`: poses of the processed frames, TUM timestamps =
+    capture times, frames numbered by capture index."""
+    from autotrack.cli.localize import DEFAULT_FPS, summarise
+    from autotrack.io.live import LiveLog, LiveReader, describe_source
+    from autotrack.localization.pnp import boxes_by_landmark
+    from autotrack.pipeline.live import run_live, warm_up
+
+    boxes = boxes_by_landmark(init, scene)
+    reader = LiveReader(args.sequence, fps=args.fps)
+    warm_up(tracker_params, reader.frame_size, list(boxes.values()))
+    progress = tqdm(unit="frame", desc=describe_source(args.sequence), disable=args.quiet)
+    records = []
+    with reader, progress:
+        log = LiveLog(reader)
+        outcomes = run_live(
+            log,
+            tracker_params,
+            lambda pipeline, frame_index: pipeline.add_targets(frame_index, boxes),
+            scene=scene,
+            localizer_params=localizer_params,
+            recording=_live_recording(args, scene_path),
+            fps=reader.fps or DEFAULT_FPS,
+            threads=args.threads,
+        )
+        for _, outcome in outcomes:
+            records.append(outcome)
+            progress.update()
+    summary = log.summary()
+    capture_times = np.array([frame.capture_time for frame in summary.processed])
+    name = describe_source(args.sequence)
+    print(summarise(records, capture_times, scene, args.out, args.tracks, None, name))
+    if gt is not None:
+        # The ground truth is timed by the source's frames: match by capture index / fps.
+        source_fps = reader.source_fps or reader.fps or DEFAULT_FPS
+        frame_times = np.array([record.frame_index for record in records]) / source_fps
+        table = summarise(records, frame_times, scene, None, None, gt, name)
+        print(table.split("\n", 1)[1])
+    if args.session is not None:
+        print(f"session recorded to {args.session}")
+    _finish(summary, args.frame_log)
+    return 0

@@ -1,0 +1,271 @@
+"""Frame sources: a folder of images, a benchmark sequence folder or a video file, read by index.
+
+Every source returns RGB uint8 frames (H x W x 3), or H x W for single-channel image files;
+`read_bgr` gives OpenCV's channel order for OpenCV trackers. Image folders are read in plain
+sorted file-name order (benchmark frames are zero-padded, so that is frame order). Videos are
+decoded sequentially: reading forward is one decode per frame, a small cache serves short
+backward steps, and a longer backward jump re-opens the video and decodes from the start
+(exact for every codec, unlike container seeking).
+"""
+
+from __future__ import annotations
+
+from abc import ABC, abstractmethod
+from collections import OrderedDict
+from collections.abc import Iterator, Sequence
+from functools import cached_property
+from pathlib import Path
+
+import cv2
+import numpy as np
+
+from autotrack.errors import InputError
+
+IMAGE_EXTENSIONS = frozenset({".jpg", ".jpeg", ".png", ".bmp", ".tif", ".tiff", ".webp"})
+"""File extensions (lower case) read as frames."""
+
+VIDEO_CACHE_FRAMES = 16
+"""Decoded video frames kept for backward steps without re-decoding."""
+
+
+def _frame_label(index: int) -> str:
+    return f"frame {index} (0-based; frame {index + 1} counting from 1)"
+
+
+def list_image_files(folder: Path) -> list[Path]:
+    """The image files directly inside `folder`, in sorted name order."""
+    return sorted(
+        entry
+        for entry in folder.iterdir()
+        if entry.is_file() and entry.suffix.lower() in IMAGE_EXTENSIONS
+    )
+
+
+def read_image(path: Path, index: int | None = None, *, bgr: bool = False) -> np.ndarray:
+    """Decode one image file as uint8: RGB (or BGR), or 2-D for single-channel files.
+
+    `index` is only used to name the frame in the error message.
+    """
+    label = f"{_frame_label(index)}: " if index is not None else ""
+    try:
+        encoded = np.fromfile(path, dtype=np.uint8)
+    except OSError as error:
+        raise InputError(f"{label}cannot read image file {path}: {error.strerror}") from error
+    image = cv2.imdecode(encoded, cv2.IMREAD_ANYCOLOR) if encoded.size else None
+    if image is None:
+        raise InputError(f"{label}cannot decode image file {path} (corrupt or not an image)")
+    if image.ndim == 3 and not bgr:
+        image = cv2.cvtColor(image, cv2.COLOR_BGR2RGB)
+    return image
+
+
+class FrameSource(ABC):
+    """Frames of one sequence, read by 0-based index."""
+
+    name: str
+    """Short name of the source (folder or file stem)."""
+    fps: float | None
+    """Frame rate from the video header; None for image folders."""
+
+    @abstractmethod
+    def __len__(self) -> int:
+        """Number of frames."""
+
+    @abstractmethod
+    def _read_bgr(self, index: int) -> np.ndarray:
+        """Decode frame `index` (already checked to be in range) in BGR order."""
+
+    def _check_index(self, index: int) -> int:
+        count = len(self)
+        if not -count <= index < count:
+            raise IndexError(f"frame index {index} out of range for {count} frames of {self.name}")
+        return index % count
+
+    def read_bgr(self, index: int) -> np.ndarray:
+        """Frame `index` (0-based) in OpenCV's BGR order (2-D for single-channel images)."""
+        return self._read_bgr(self._check_index(index))
+
+    def read(self, index: int) -> np.ndarray:
+        """Frame `index` (0-based) as RGB uint8 (2-D for single-channel images)."""
+        frame = self.read_bgr(index)
+        return cv2.cvtColor(frame, cv2.COLOR_BGR2RGB) if frame.ndim == 3 else frame
+
+    @cached_property
+    def frame_size(self) -> tuple[int, int]:
+        """(width, height) of the first frame in pixels."""
+        height, width = self.read_bgr(0).shape[:2]
+        return (width, height)
+
+    def previous_index(self, index: int) -> int:
+        """The frame tracked before frame `index`: `index - 1` (a live source skips the frames
+        it dropped)."""
+        return index - 1
+
+    def __iter__(self) -> Iterator[np.ndarray]:
+        for index in range(len(self)):
+            yield self.read(index)
+
+    @abstractmethod
+    def close(self) -> None:
+        """Release any open file handle."""
+
+    def __enter__(self) -> FrameSource:
+        return self
+
+    def __exit__(self, *exc_info: object) -> None:
+        self.close()
+
+
+class ImageSequence(FrameSource):
+    """Frames stored as one image file each."""
+
+    def __init__(self, paths: Sequence[Path], name: str) -> None:
+        if not paths:
+            raise InputError(f"{name}: no image frames")
+        self.paths: tuple[Path, ...] = tuple(Path(p) for p in paths)
+        self.name = name
+        self.fps = None
+
+    def __len__(self) -> int:
+        return len(self.paths)
+
+    def _read_bgr(self, index: int) -> np.ndarray:
+        return read_image(self.paths[index], index, bgr=True)
+
+    def close(self) -> None:
+        """Nothing to release: each read opens and closes its file."""
+
+
+class InMemoryFrames(FrameSource):
+    """Frames already decoded (RGB or grey uint8 arrays), e.g. rendered or edited in memory."""
+
+    def __init__(self, frames: Sequence[np.ndarray], name: str, fps: float | None = None) -> None:
+        if not frames:
+            raise InputError(f"{name}: no frames")
+        self.frames = list(frames)
+        self.name = name
+        self.fps = fps
+
+    def __len__(self) -> int:
+        return len(self.frames)
+
+    def read(self, index: int) -> np.ndarray:
+        return self.frames[self._check_index(index)]
+
+    def _read_bgr(self, index: int) -> np.ndarray:
+        frame = self.frames[index]
+        return cv2.cvtColor(frame, cv2.COLOR_RGB2BGR) if frame.ndim == 3 else frame
+
+    def close(self) -> None:
+        """Nothing to release."""
+
+
+class VideoFrames(FrameSource):
+    """Frames decoded from a video file by OpenCV, in order, with a small cache."""
+
+    def __init__(self, path: Path) -> None:
+        self.path = path
+        self.name = path.stem
+        self._capture = self._open()
+        self._count = int(self._capture.get(cv2.CAP_PROP_FRAME_COUNT))
+        fps = float(self._capture.get(cv2.CAP_PROP_FPS))
+        self.fps = fps if np.isfinite(fps) and fps > 0 else None
+        self._next_index = 0
+        self._cache: OrderedDict[int, np.ndarray] = OrderedDict()
+        if self._count <= 0:
+            self._count = self._count_by_decoding()
+
+    def _open(self) -> cv2.VideoCapture:
+        capture = cv2.VideoCapture(str(self.path))
+        if not capture.isOpened():
+            capture.release()
+            raise InputError(f"cannot open video {self.path} (unsupported format or corrupt file)")
+        return capture
+
+    def _count_by_decoding(self) -> int:
+        count = 0
+        while self._capture.grab():
+            count += 1
+        self._rewind()
+        if count == 0:
+            raise InputError(f"video {self.path} has no decodable frames")
+        return count
+
+    def _rewind(self) -> None:
+        self._capture.release()
+        self._capture = self._open()
+        self._next_index = 0
+
+    def __len__(self) -> int:
+        return self._count
+
+    def _read_bgr(self, index: int) -> np.ndarray:
+        if index in self._cache:
+            self._cache.move_to_end(index)
+            return self._cache[index]
+        if index < self._next_index:
+            self._rewind()
+        while self._next_index < index:
+            if not self._capture.grab():
+                break
+            self._next_index += 1
+        ok, frame = self._capture.read() if self._next_index == index else (False, None)
+        if not ok or frame is None:
+            raise InputError(
+                f"{_frame_label(index)}: cannot decode from video {self.path} "
+                f"(the header announces {self._count} frames)"
+            )
+        self._next_index = index + 1
+        self._cache[index] = frame
+        if len(self._cache) > VIDEO_CACHE_FRAMES:
+            self._cache.popitem(last=False)
+        return frame
+
+    def close(self) -> None:
+        self._capture.release()
+        self._cache.clear()
+
+
+def open_frames(path: str | Path) -> FrameSource:
+    """Open a folder of images, a benchmark sequence folder (with `img/`), an image or a video.
+
+    Raises InputError for a missing path, a folder without images, or a video OpenCV cannot
+    open. Corrupt image files are reported when read, naming the frame and the file.
+    """
+    path = Path(path).expanduser()
+    if not path.exists():
+        raise InputError(f"no such file or folder: {path}")
+    if path.is_dir():
+        image_folder = path / "img" if (path / "img").is_dir() else path
+        paths = list_image_files(image_folder)
+        if not paths:
+            extensions = ", ".join(sorted(IMAGE_EXTENSIONS))
+            raise InputError(f"no image files ({extensions}) in folder {image_folder}")
+        return ImageSequence(paths, path.name)
+    if path.suffix.lower() in IMAGE_EXTENSIONS:
+        return ImageSequence([path], path.stem)
+    return VideoFrames(path)
+
+
+class FrameCache:
+    """The last few frames read from a FrameSource, for stepping back and forth without
+    decoding again."""
+
+    def __init__(self, frames: FrameSource, size: int) -> None:
+        self.frames = frames
+        self.size = size
+        self._cached: OrderedDict[int, np.ndarray] = OrderedDict()
+
+    def read(self, index: int) -> np.ndarray:
+        """Frame `index` (RGB uint8); InputError outside the sequence."""
+        if not 0 <= index < len(self.frames):
+            raise InputError(f"frame {index} is outside 0..{len(self.frames) - 1}")
+        cached = self._cached.get(index)
+        if cached is not None:
+            self._cached.move_to_end(index)
+            return cached
+        image = self.frames.read(index)
+        self._cached[index] = image
+        if len(self._cached) > self.size:
+            self._cached.popitem(last=False)
+        return image

@@ -1,0 +1,127 @@
+"""Trackers grouped by the frame they are at: one MultiTracker per group.
+
+A group's targets all sit at the same last tracked frame (its head). Boxes drawn on the same
+frame join one group, so the usual case (every box on the first frame, then play) is a single
+MultiTracker. A box redrawn on a target whose group is at that frame resets the target in
+place; redrawn at an earlier frame, the target leaves its group and restarts in the group at
+that frame (or a new one), and the other targets keep their filters.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass, replace
+
+import numpy as np
+
+from autotrack.params import TrackerParams
+from autotrack.result import TrackResult
+from autotrack.tracker.multi import MultiTracker
+
+Box = tuple[float, float, float, float]
+
+
+@dataclass
+class _Group:
+    tracker: MultiTracker
+    head: int
+    target_ids: list[str]
+
+
+class TrackerGroups:
+    """The MultiTrackers of one pipeline; results carry the sequence's frame index."""
+
+    def __init__(self, params: TrackerParams, threads: int) -> None:
+        self.params = params
+        self.threads = threads
+        self._groups: list[_Group] = []
+
+    @property
+    def tracked_until(self) -> int:
+        """Last frame every group has reached (-1 without groups)."""
+        return min((group.head for group in self._groups), default=-1)
+
+    def __bool__(self) -> bool:
+        return bool(self._groups)
+
+    def start(
+        self, frame_index: int, frame: np.ndarray, boxes: Mapping[str, Box]
+    ) -> dict[str, TrackResult]:
+        """(Re)start each target of `boxes` on `frame` (sequence frame `frame_index`)."""
+        results: dict[str, TrackResult] = {}
+        fresh: dict[str, Box] = {}
+        for target_id, box in boxes.items():
+            current = self._group_of(target_id)
+            joined = next((g for g in self._groups if g.head == frame_index), None)
+            if current is not None and current.head == frame_index:
+                results[target_id] = current.tracker.reset_target(target_id, frame, box)
+            elif joined is not None:
+                results[target_id] = joined.tracker.add_target(target_id, frame, box)
+                joined.target_ids.append(target_id)
+                if current is not None:
+                    self._leave(target_id, current)
+            else:
+                fresh[target_id] = box
+        if fresh:
+            tracker = MultiTracker(self.params, list(fresh), threads=self.threads)
+            try:
+                results.update(tracker.init(frame, fresh))
+            except Exception:
+                tracker.close()
+                raise
+            for target_id in fresh:
+                current = self._group_of(target_id)
+                if current is not None:
+                    self._leave(target_id, current)
+            self._groups.append(_Group(tracker, frame_index, list(fresh)))
+        return {k: _renumbered(results[k], frame_index) for k in boxes}
+
+    def advance(
+        self, frame_index: int, previous: int, frame_of: Callable[[int], np.ndarray]
+    ) -> tuple[dict[str, TrackResult], float]:
+        """Track every group whose head is the previous frame (`previous`, usually
+        `frame_index - 1`) onto `frame_index`.
+
+        `frame_of(index)` gives the frame (read only when a group is due). Returns the results
+        and the tracking time in seconds (NaN when no group was due).
+        """
+        due = [group for group in self._groups if group.head == previous]
+        if not due:
+            return {}, float("nan")
+        frame = frame_of(frame_index)
+        started = time.perf_counter()
+        results: dict[str, TrackResult] = {}
+        for group in due:
+            for target_id, result in group.tracker.update(frame).items():
+                results[target_id] = _renumbered(result, frame_index)
+            group.head = frame_index
+        return results, time.perf_counter() - started
+
+    def remove(self, target_id: str) -> None:
+        """Stop tracking a target (nothing when it is not tracked)."""
+        group = self._group_of(target_id)
+        if group is not None:
+            self._leave(target_id, group)
+
+    def close(self) -> None:
+        """Stop every tracker's threads."""
+        for group in self._groups:
+            group.tracker.close()
+        self._groups.clear()
+
+    def _group_of(self, target_id: str) -> _Group | None:
+        return next((group for group in self._groups if target_id in group.target_ids), None)
+
+    def _leave(self, target_id: str, group: _Group) -> None:
+        group.target_ids.remove(target_id)
+        if group.target_ids:
+            group.tracker.remove_target(target_id)
+        else:
+            group.tracker.close()
+            self._groups.remove(group)
+
+
+def _renumbered(result: TrackResult, frame_index: int) -> TrackResult:
+    # A group numbers its frames from the one it started on; results carry the sequence's.
+    return replace(result, frame_index=frame_index)

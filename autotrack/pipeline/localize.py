@@ -1,0 +1,51 @@
+"""Localisation over a whole sequence: the pipeline with every landmark boxed on the first frame."""
+
+from __future__ import annotations
+
+from collections.abc import Iterator, Mapping, Sequence
+
+import numpy as np
+
+from autotrack.io.frames import FrameSource, InMemoryFrames
+from autotrack.localization.localizer import LocalizerParams
+from autotrack.localization.pnp import boxes_by_landmark
+from autotrack.localization.scene import Scene
+from autotrack.params import TrackerParams
+from autotrack.pipeline.pipeline import Pipeline
+from autotrack.pipeline.recording import Recording
+from autotrack.pipeline.targets import FrameOutcome
+
+Box = tuple[float, float, float, float]
+
+
+def localize_sequence(
+    frames: FrameSource | Sequence[np.ndarray],
+    scene: Scene,
+    init_boxes: Mapping[str, Box] | Sequence[Box],
+    tracker_params: TrackerParams,
+    localizer_params: LocalizerParams | None = None,
+    *,
+    recording: Recording | None = None,
+    fps: float | None = None,
+    threads: int = 1,
+) -> Iterator[FrameOutcome]:
+    """Track every landmark and estimate the camera pose frame by frame.
+
+    `frames` is a FrameSource or a list of RGB frames. `init_boxes` gives the first frame's
+    boxes (x, y, w, h, 0-based pixels): landmark id -> box, or a list of boxes whose landmarks
+    the correspondence search finds on the first frame (boxes.json's two forms).
+    """
+    if not isinstance(frames, FrameSource):
+        frames = InMemoryFrames(list(frames), name="frames")
+    boxes = boxes_by_landmark(init_boxes, scene)
+    with Pipeline(
+        frames,
+        tracker_params,
+        scene=scene,
+        localizer_params=localizer_params,
+        recording=recording,
+        fps=fps,
+        tracker_threads=threads,
+    ) as pipeline:
+        pipeline.add_targets(0, boxes)
+        yield from pipeline.run()

@@ -1,0 +1,498 @@
+"""The pipeline: frames -> targets -> camera pose -> session recording, one frame at a time.
+
+It owns frame indexing and timing (as pytracking's runner does): trackers only answer for the
+frame they are given, the localiser only for the points it is given, and the recorder writes
+what the pipeline hands it. The command line (`track`, `localize`), `localize_sequence`, the
+benchmark scripts and the app all drive this one class.
+
+Targets are named "T1", "T2", ... in the order they are added, whatever the caller; a target
+that localises a scene landmark carries its id (`landmark_id`). Editing a box at an earlier
+frame re-tracks only that target from there; the other targets keep their results and filters.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable, Iterator, Mapping
+from pathlib import Path
+from types import EllipsisType
+from typing import Any
+
+import numpy as np
+
+from autotrack.errors import InputError
+from autotrack.io.frames import FrameCache, FrameSource
+from autotrack.localization.localizer import Localizer, LocalizerParams
+from autotrack.localization.scene import Scene
+from autotrack.params import TrackerParams
+from autotrack.pipeline.groups import TrackerGroups
+from autotrack.pipeline.recording import Recording, open_recorder
+from autotrack.pipeline.targets import SIGNAL_NAMES, FrameOutcome, TrackedTarget, grown, number_of
+from autotrack.result import PoseEstimate, TrackResult
+from autotrack.sessions import Session, SessionRecorder
+from autotrack.tracker.tracker import validate_box
+
+Box = tuple[float, float, float, float]
+
+FRAME_CACHE = 8
+"""Decoded frames kept for stepping back and forth without decoding again."""
+
+
+class Pipeline:
+    """Targets, trackers, results and poses of one sequence, recorded as it goes.
+
+    Args:
+        frames: The sequence.
+        params: Tracker parameters for every target.
+        scene: Localisation scene (None: no poses).
+        localizer_params: Localiser settings (None: the library defaults).
+        recording: Where to record the session (None: not recorded).
+        fps: Frame rate of the log times (None: the frames' own, else the recorder's default).
+        tracker_threads: Threads each MultiTracker may use for its targets.
+    """
+
+    def __init__(
+        self,
+        frames: FrameSource,
+        params: TrackerParams,
+        *,
+        scene: Scene | None = None,
+        localizer_params: LocalizerParams | None = None,
+        recording: Recording | None = None,
+        fps: float | None = None,
+        tracker_threads: int = 1,
+    ) -> None:
+        if tracker_threads < 1:
+            raise InputError(f"tracker threads must be at least 1, got {tracker_threads}")
+        if scene is not None:
+            scene.camera.check_image_size(*frames.frame_size)
+        self.frames = frames
+        self.params = params
+        self.scene = scene
+        self.recording = recording
+        self.fps = fps if fps is not None else frames.fps
+        self.frame_count = len(frames)
+        self.targets: dict[str, TrackedTarget] = {}
+        self.poses: dict[int, PoseEstimate] = {}
+        self.frame_seconds = np.full(self.frame_count, np.nan)
+        """Tracking time of each frame (every tracker that ran on it), seconds."""
+        self.resumed_from: Path | None = None
+        self.resume_frame = 0
+        """After `resume`: the frame tracking continues from."""
+        self._groups = TrackerGroups(params, tracker_threads)
+        self._localizer = (
+            None if scene is None else Localizer(scene, localizer_params or LocalizerParams())
+        )
+        self._last_pose_frame = -1
+        self._next_number = 1
+        self._frame_cache = FrameCache(frames, FRAME_CACHE)
+        self._recorder: SessionRecorder | None = None
+        self._embedded: set[int] = set()
+
+    @classmethod
+    def resume(
+        cls,
+        session: Session,
+        frames: FrameSource,
+        *,
+        scene: Scene | None = None,
+        localizer_params: LocalizerParams | None = None,
+        recording: Recording | None = None,
+        fps: float | None = None,
+        tracker_threads: int = 1,
+    ) -> Pipeline:
+        """Continue a recorded session on `frames` with its recorded tracker parameters.
+
+        Its results and poses become this pipeline's history (copied into the new recording,
+        which names the session as `resumed_from`), and each live target restarts from its
+        last recorded box; `resume_frame` is the earliest restart. Filters are not stored in a
+        session, so a restarted target learns afresh from its last box.
+        """
+        pipeline = cls(
+            frames,
+            session.tracker_params(),
+            scene=scene,
+            localizer_params=localizer_params,
+            recording=recording,
+            fps=fps,
+            tracker_threads=tracker_threads,
+        )
+        pipeline.resumed_from = session.path
+        pipeline._restore(session)
+        return pipeline
+
+    # -- frames -------------------------------------------------------------------------------
+
+    def frame(self, index: int) -> np.ndarray:
+        """Frame `index` (RGB uint8), from a small cache."""
+        return self._frame_cache.read(index)
+
+    # -- recording ----------------------------------------------------------------------------
+
+    @property
+    def session_path(self) -> Path | None:
+        """The recording's file (None until the first edit, or when not recording)."""
+        return None if self._recorder is None else self._recorder.path
+
+    def flush(self) -> None:
+        """Hand everything recorded so far to the OS (e.g. before exporting the session)."""
+        if self._recorder is not None:
+            self._recorder.flush()
+
+    def _recorder_or_none(self) -> SessionRecorder | None:
+        if self._recorder is None and self.recording is not None:
+            self._recorder = open_recorder(
+                self.recording, self.params, self.fps, self.resumed_from, self.frames.name
+            )
+            if self.scene is not None:
+                self._recorder.log_landmarks(self.scene)
+        return self._recorder
+
+    def _embed_frame(self, frame_index: int) -> None:
+        """The frame itself into the recording, once, when the recording embeds frames."""
+        recorder = self._recorder_or_none()
+        if (
+            recorder is not None
+            and frame_index not in self._embedded
+            and recorder.log_frame(frame_index, self.frame(frame_index))
+        ):
+            self._embedded.add(frame_index)
+
+    def _log_event(self, kind: str, frame_index: int, target_id: str | None, **extra: Any) -> None:
+        recorder = self._recorder_or_none()
+        if recorder is not None:
+            recorder.log_event(kind, frame_index, target_id, **extra)
+
+    def close(self) -> None:
+        """Stop the trackers' threads and finish the recording (the file is readable without
+        this, up to its last flush)."""
+        self._groups.close()
+        if self._recorder is not None:
+            self._recorder.close()
+            self._recorder = None
+
+    def __enter__(self) -> Pipeline:
+        return self
+
+    def __exit__(self, *exc_info: object) -> None:
+        self.close()
+
+    # -- targets ------------------------------------------------------------------------------
+
+    def free_landmarks(self) -> list[str]:
+        """Scene landmarks no target localises yet, in scene order."""
+        if self.scene is None:
+            return []
+        taken = {target.landmark_id for target in self.targets.values()}
+        return [landmark for landmark in self.scene.landmark_ids if landmark not in taken]
+
+    def add_target(
+        self, frame_index: int, box: Box, landmark_id: str | None | EllipsisType = ...
+    ) -> str:
+        """A new target with its box on frame `frame_index`; returns its id.
+
+        `landmark_id=...` (the default) assigns the first free scene landmark.
+        """
+        if landmark_id is ...:
+            free = self.free_landmarks()
+            landmark_id = free[0] if free else None
+        return self._add(frame_index, [(box, landmark_id)])[0]
+
+    def add_targets(self, frame_index: int, boxes: Mapping[str, Box]) -> list[str]:
+        """One target per landmark id -> box, all on frame `frame_index` in one step (one pose
+        estimate); returns their ids in the order given."""
+        return self._add(frame_index, [(box, landmark) for landmark, box in boxes.items()])
+
+    def _add(self, frame_index: int, entries: list[tuple[Box, str | None]]) -> list[str]:
+        if not entries:
+            raise InputError("no targets to add: give at least one box")
+        self._check_frame(frame_index)
+        landmarks = [landmark for _, landmark in entries if landmark is not None]
+        if len(set(landmarks)) != len(landmarks):
+            raise InputError("each landmark can be tracked by one target only")
+        for _, landmark in entries:
+            self._check_landmark(landmark, None)
+        boxes = {
+            f"T{self._next_number + k}": self._checked_box(box, frame_index)
+            for k, (box, _) in enumerate(entries)
+        }
+        results = self._timed_start(frame_index, boxes)
+        self._embed_frame(frame_index)
+        for target_id, (_, landmark) in zip(boxes, entries, strict=True):
+            self.targets[target_id] = TrackedTarget(
+                id=target_id,
+                number=self._next_number,
+                landmark_id=landmark,
+                signals={name: np.full(self.frame_count, np.nan) for name in SIGNAL_NAMES},
+            )
+            self._next_number += 1
+            self._store(self.targets[target_id], results[target_id])
+        self._forget_poses_from(frame_index)
+        self._estimate_pose(frame_index)
+        for target_id, (_, landmark) in zip(boxes, entries, strict=True):
+            box = boxes[target_id]
+            self._log_event("box_drawn", frame_index, target_id, box=box, landmark_id=landmark)
+        return list(boxes)
+
+    def place_box(self, target_id: str, frame_index: int, box: Box) -> None:
+        """Redraw a target's box at `frame_index`: a correction when it was tracked there.
+
+        Results after `frame_index` of this target are dropped; it is re-tracked from here.
+        """
+        target = self._target(target_id)
+        self._check_frame(frame_index)
+        box = self._checked_box(box, frame_index)
+        corrected = frame_index in target.results
+        result = self._timed_start(frame_index, {target_id: box})[target_id]
+        self._restart(target, result)
+        kind = "box_corrected" if corrected else "box_drawn"
+        self._log_event(kind, frame_index, target_id, box=box)
+
+    def delete_target(self, target_id: str, frame_index: int) -> None:
+        """Remove a target, its tracker and its results; poses are re-estimated without it."""
+        target = self._target(target_id)
+        self._groups.remove(target_id)
+        first = min(target.results, default=frame_index)
+        del self.targets[target_id]
+        self._forget_poses_from(first)
+        self._log_event("box_deleted", frame_index, target_id)
+        self._estimate_pose(frame_index)
+
+    def assign_landmark(self, target_id: str, landmark_id: str | None, frame_index: int) -> None:
+        """Make a target localise `landmark_id` (None: none); poses are re-estimated."""
+        target = self._target(target_id)
+        if target.landmark_id == landmark_id:
+            return
+        self._check_landmark(landmark_id, target_id)
+        target.landmark_id = landmark_id
+        self._forget_poses_from(min(target.results, default=0))
+        self._log_event("landmark_assigned", frame_index, target_id, landmark_id=landmark_id)
+        self._estimate_pose(frame_index)
+
+    def _checked_box(self, box: Box, frame_index: int) -> Box:
+        """The box as four floats, checked against its frame as the tracker will."""
+        height, width = self.frame(frame_index).shape[:2]
+        x, y, w, h = validate_box(box, (width, height))
+        return (x, y, w, h)
+
+    def _check_frame(self, frame_index: int) -> None:
+        if not 0 <= frame_index < self.frame_count:
+            raise InputError(f"frame {frame_index} is outside 0..{self.frame_count - 1}")
+
+    def _check_landmark(self, landmark_id: str | None, target_id: str | None) -> None:
+        if landmark_id is None:
+            return
+        if self.scene is None:
+            raise InputError("no scene is loaded, so boxes cannot be tied to landmarks")
+        if landmark_id not in self.scene.landmark_ids:
+            known = ", ".join(self.scene.landmark_ids)
+            raise InputError(f"unknown landmark {landmark_id!r}; the scene has {known}")
+        for other in self.targets.values():
+            if other.id != target_id and other.landmark_id == landmark_id:
+                raise InputError(f"landmark {landmark_id} is already tracked by {other.id}")
+
+    def _target(self, target_id: str) -> TrackedTarget:
+        try:
+            return self.targets[target_id]
+        except KeyError:
+            raise InputError(f"no target {target_id!r}") from None
+
+    # -- tracking -----------------------------------------------------------------------------
+
+    @property
+    def tracked_until(self) -> int:
+        """Last frame every live target has a result for (-1 without targets)."""
+        return self._groups.tracked_until
+
+    @property
+    def furthest_frame(self) -> int:
+        """Last frame any target has a result for (-1 without targets)."""
+        return max((target.last_frame for target in self.targets.values()), default=-1)
+
+    def advance(self, frame_index: int) -> None:
+        """Track every target whose tracker is at the previous frame onto `frame_index`, then
+        estimate the pose there if it is not known yet. A growing (live) source's new frames
+        are taken in first; its previous frame is the last one it did not drop."""
+        if frame_index >= self.frame_count:
+            self._grow()
+        if not 0 < frame_index < self.frame_count:
+            return
+        previous = self.frames.previous_index(frame_index)
+        results, seconds = self._groups.advance(frame_index, previous, self.frame)
+        if results:
+            self.frame_seconds[frame_index] = seconds
+            self._embed_frame(frame_index)
+            for target_id, result in results.items():
+                self._store(self.targets[target_id], result)
+        self._estimate_pose(frame_index)
+
+    def _grow(self) -> None:
+        """Take in the frames a growing (live) source delivered since the last call."""
+        self.frame_count = len(self.frames)
+        self.frame_seconds = grown(self.frame_seconds, self.frame_count)
+        for target in self.targets.values():
+            target.grow(self.frame_count)
+
+    def track_to(self, frame_index: int, should_stop: Callable[[], bool] | None = None) -> None:
+        """Track forward until every target has a result at `frame_index` (or `should_stop`)."""
+        frame_index = min(frame_index, self.frame_count - 1)
+        while self._groups and self.tracked_until < frame_index:
+            if should_stop is not None and should_stop():
+                return
+            self.advance(self.tracked_until + 1)
+
+    def run(self) -> Iterator[FrameOutcome]:
+        """Every frame's outcome from the first frame with a result to the last, tracking the
+        frames not tracked yet on the way."""
+        first = min((min(t.results) for t in self.targets.values() if t.results), default=None)
+        if first is None:
+            raise InputError("no targets to track: add a box first")
+        for frame_index in range(first, self.frame_count):
+            if self._groups and self.tracked_until < frame_index:
+                self.track_to(frame_index)
+            yield self.outcome(frame_index)
+
+    def results_at(self, frame_index: int) -> dict[str, TrackResult]:
+        """Target id -> result at `frame_index`, for targets that have one."""
+        return {
+            target.id: target.results[frame_index]
+            for target in self.targets.values()
+            if frame_index in target.results
+        }
+
+    def outcome(self, frame_index: int) -> FrameOutcome:
+        """What is known about frame `frame_index`: results, landmarks, pose."""
+        return FrameOutcome(
+            frame_index=frame_index,
+            tracks=self.results_at(frame_index),
+            landmark_ids={t.id: t.landmark_id for t in self.targets.values()},
+            pose=self.poses.get(frame_index),
+        )
+
+    def _timed_start(self, frame_index: int, boxes: Mapping[str, Box]) -> dict[str, TrackResult]:
+        frame = self.frame(frame_index)
+        started = time.perf_counter()
+        results = self._groups.start(frame_index, frame, boxes)
+        elapsed = time.perf_counter() - started
+        self.frame_seconds[frame_index] = np.nansum([self.frame_seconds[frame_index], elapsed])
+        return results
+
+    def _restart(self, target: TrackedTarget, result: TrackResult) -> None:
+        """`result` becomes the target's result on its frame; its later results are dropped."""
+        frame_index = result.frame_index
+        recorder = self._recorder_or_none()
+        for later in [index for index in target.results if index > frame_index]:
+            del target.results[later]
+            if recorder is not None:
+                # The recording keeps the latest record per frame: this one says the target has
+                # no result there any more (until it is tracked again).
+                recorder.log_no_result(target.id, later, landmark_id=target.landmark_id)
+        for values in target.signals.values():
+            values[frame_index:] = np.nan
+        self._store(target, result)
+        self._forget_poses_from(frame_index)
+        self._estimate_pose(frame_index)
+
+    def _store(self, target: TrackedTarget, result: TrackResult, *, record: bool = True) -> None:
+        """Keep `result` as the target's result on its frame (and record it)."""
+        frame_index = result.frame_index
+        target.results[frame_index] = result
+        values = {
+            "peak_score": result.peak_score,
+            "global_variation": result.global_variation,
+            "theta_ref": result.theta_ref,
+            "theta": result.theta,
+            "aberrant": 1.0 if result.aberrant else 0.0,
+        }
+        for name, value in values.items():
+            target.signals[name][frame_index] = value
+        recorder = self._recorder_or_none() if record else None
+        if recorder is not None:
+            recorder.log_target(target.id, result, landmark_id=target.landmark_id)
+
+    def _restore(self, session: Session) -> None:
+        live = {
+            target_id: target
+            for target_id, target in session.recorded_targets().items()
+            if target.last_box is not None and 0 <= target.last_box[0] < self.frame_count
+        }
+        restarts: dict[int, dict[str, Box]] = {}
+        for target_id, recorded in live.items():
+            frame_index, box = recorded.last_box
+            restarts.setdefault(frame_index, {})[target_id] = box
+        resume_frame = min(restarts, default=0)
+        for position, (target_id, recorded) in enumerate(live.items()):
+            landmark = recorded.landmark_id
+            if self.scene is None or landmark not in self.scene.landmark_ids:
+                landmark = None
+            number = number_of(target_id, position + 1)
+            target = TrackedTarget(
+                id=target_id,
+                number=number,
+                landmark_id=landmark,
+                signals={name: np.full(self.frame_count, np.nan) for name in SIGNAL_NAMES},
+            )
+            self.targets[target_id] = target
+            self._next_number = max(self._next_number, number + 1)
+            for frame_index, result in sorted(recorded.results.items()):
+                if frame_index <= recorded.last_box[0]:
+                    self._store(target, result)
+        for frame_index, pose in sorted(session.pose_estimates().items()):
+            if frame_index < resume_frame:
+                self.poses[frame_index] = pose
+                recorder = self._recorder_or_none()
+                if recorder is not None:
+                    recorder.log_pose(pose)
+        for frame_index, boxes in sorted(restarts.items()):
+            started = self._timed_start(frame_index, boxes)
+            for target_id, result in started.items():
+                target = self.targets[target_id]
+                self._restart(target, target.results.get(frame_index, result))
+        self.resume_frame = resume_frame
+        self._log_event("session_resumed", resume_frame, None, source=str(session.path))
+
+    # -- localisation -------------------------------------------------------------------------
+
+    def _forget_poses_from(self, first_stale: int) -> None:
+        """Drop the poses from `first_stale` on (a box before them changed); the recording
+        marks each as superseded, and the localiser starts afresh."""
+        recorder = self._recorder_or_none() if self.targets else None
+        for index in [index for index in self.poses if index >= first_stale]:
+            del self.poses[index]
+            if recorder is not None:
+                recorder.log_no_pose(index, "discarded: a box was redrawn on an earlier frame")
+        if self._localizer is not None and self._last_pose_frame >= first_stale:
+            # The localiser keeps the previous pose as a continuity prior: start it afresh.
+            self._localizer.reset()
+            self._last_pose_frame = -1
+
+    def _estimate_pose(self, frame_index: int) -> None:
+        if self._localizer is None or frame_index in self.poses:
+            return
+        points: dict[str, tuple[float, float]] = {}
+        confidences: dict[str, float] = {}
+        aberrant: dict[str, bool] = {}
+        for target in self.targets.values():
+            result = target.results.get(frame_index)
+            if target.landmark_id is None or result is None:
+                continue
+            points[target.landmark_id] = result.center
+            confidences[target.landmark_id] = float(result.peak_score)
+            aberrant[target.landmark_id] = bool(result.aberrant)
+        if not points:
+            return
+        if self._last_pose_frame != self.frames.previous_index(frame_index):
+            self._localizer.reset()
+        pose = self._localizer.estimate(frame_index, points, confidences, aberrant)
+        self._last_pose_frame = frame_index
+        self.poses[frame_index] = pose
+        recorder = self._recorder_or_none()
+        if recorder is not None:
+            recorder.log_pose(pose)
+
+    def valid_positions(self) -> Iterator[tuple[int, np.ndarray]]:
+        """(frame index, camera position) of the valid poses, in frame order."""
+        for index in sorted(self.poses):
+            pose = self.poses[index]
+            if pose.valid:
+                yield index, np.asarray(pose.position, dtype=np.float64)

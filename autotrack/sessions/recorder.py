@@ -1,0 +1,498 @@
+"""Recording a session: every tracked frame, pose and user edit, to one MCAP file.
+
+A session file is written incrementally while frames are processed, so annotation and tracking
+work survives a crash, and it opens in Foxglove with no plugin (well-known schemas, JSON
+encoding). Layout, topics and the map quantisation are described in docs/sessions.md.
+
+Crash safety: messages are gathered in a zstd-compressed MCAP chunk that is closed and handed to
+the operating system (`mcap.writer.Writer.flush`, then the file object's flush) as soon as its
+oldest message is `flush_interval` seconds old, by the next write or, when the recorder is idle,
+by a background timer. User edits are flushed at once. A `kill -9` therefore loses at most the
+last `flush_interval` (1 s) of records; `open_session` reads everything before the cut.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import re
+import threading
+import time
+from collections.abc import Mapping, Sequence
+from datetime import UTC, datetime
+from pathlib import Path
+from types import TracebackType
+from typing import Any, BinaryIO
+
+import numpy as np
+from mcap.writer import CompressionType, Writer
+
+import autotrack
+from autotrack.errors import SessionError
+from autotrack.params import TrackerParams
+from autotrack.result import PoseEstimate, TrackResult
+from autotrack.sessions import messages
+from autotrack.sessions.encoding import (
+    DEFAULT_FPS,
+    SESSION_METADATA_NAME,
+    encode_json,
+    frame_time_ns,
+)
+from autotrack.sessions.metadata import params_dict, session_metadata
+from autotrack.sessions.schemas import (
+    CAMERA_FRAME,
+    MESSAGE_ENCODING,
+    SCHEMA_ENCODING,
+    WORLD_FRAME,
+    Topic,
+    Topics,
+    schema_bytes,
+)
+
+DEFAULT_FLUSH_INTERVAL_S = 1.0
+"""Longest time a recorded message waits in memory before it reaches the OS (seconds)."""
+_TARGET_ID = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.-]{0,63}$")
+_EVENT_KIND = re.compile(r"^[a-z][a-z0-9_]{0,63}$")
+_PALETTE: tuple[tuple[float, float, float, float], ...] = (
+    (0.12, 0.47, 0.71, 1.0),
+    (0.17, 0.63, 0.17, 1.0),
+    (1.0, 0.5, 0.05, 1.0),
+    (0.58, 0.4, 0.74, 1.0),
+    (0.09, 0.75, 0.81, 1.0),
+    (0.74, 0.74, 0.13, 1.0),
+    (0.89, 0.47, 0.76, 1.0),
+    (0.55, 0.34, 0.29, 1.0),
+)
+_ABERRANT_RGBA = (0.84, 0.15, 0.16, 1.0)
+
+
+def _check_target_id(target_id: str) -> str:
+    target_id = str(target_id)
+    if not _TARGET_ID.match(target_id):
+        raise SessionError(
+            f"target id {target_id!r} cannot be recorded: use 1-64 letters, digits, '_', '-' "
+            "or '.', starting with a letter or digit"
+        )
+    return target_id
+
+
+def _safe_name(name: str) -> str:
+    cleaned = re.sub(r"[^A-Za-z0-9_.-]+", "_", name).strip("._-")
+    return cleaned[:80] or "session"
+
+
+# --- recording --------------------------------------------------------------------------------
+
+
+class SessionRecorder:
+    """Writes one session to a new MCAP file, incrementally and crash-safely.
+
+    Use as a context manager, or call `close()`; the file is complete (summary and footer) only
+    after `close()`, but everything flushed before a crash can be read back.
+    """
+
+    def __init__(
+        self,
+        path: str | Path,
+        *,
+        source: str,
+        tracker_params: TrackerParams | Mapping[str, Any],
+        scene_path: str | Path | None = None,
+        fps: float | None = None,
+        embed_frames: bool = False,
+        record_maps: bool = True,
+        jpeg_quality: int = 90,
+        flush_interval: float = DEFAULT_FLUSH_INTERVAL_S,
+        fsync: bool = False,
+        resumed_from: str | Path | None = None,
+    ) -> None:
+        """Create the session file at exactly `path`; an existing file is never overwritten.
+
+        source: what was tracked (sequence folder, video file, camera name).
+        tracker_params: the parameters of the tracker(s) of this session.
+        scene_path: localisation scene file; recorded by name and embedded as an attachment.
+        fps: frame rate of the source; log times are frame_index / fps (DEFAULT_FPS if None).
+        embed_frames: record the video frames as JPEG (`log_frame`); large, off by default.
+        record_maps: record the response and local-variation maps (mono8, ~2.5 kB each).
+        jpeg_quality: JPEG quality of embedded frames (0-100).
+        flush_interval: longest time (s) a message waits in memory before reaching the OS.
+        fsync: also fsync the file at each flush (survives power loss, slower).
+        resumed_from: the session this one continues, if any.
+        """
+        if fps is not None and not (math.isfinite(fps) and fps > 0):
+            raise SessionError(f"fps must be a positive number, got {fps}")
+        if not flush_interval > 0:
+            raise SessionError(f"flush_interval must be positive, got {flush_interval}")
+        if not hasattr(Writer, "flush"):
+            raise SessionError("recording sessions needs mcap>=1.6 (Writer.flush); upgrade mcap")
+        self.path = Path(path)
+        self.fps = float(fps) if fps is not None else DEFAULT_FPS
+        self.embed_frames = bool(embed_frames)
+        self.record_maps = bool(record_maps)
+        self.jpeg_quality = int(jpeg_quality)
+        self.flush_interval = float(flush_interval)
+        self._fsync = bool(fsync)
+        params = params_dict(tracker_params)
+        scene_bytes = None if scene_path is None else _read_scene(scene_path)
+        self._file: BinaryIO = _create_file(self.path)
+        self._lock = threading.Lock()
+        self._writer = Writer(
+            self._file, compression=CompressionType.ZSTD, enable_crcs=True, enable_data_crcs=True
+        )
+        self._schema_ids: dict[str, int] = {}
+        self._channel_ids: dict[str, int] = {}
+        self._target_colours: dict[str, tuple[float, float, float, float]] = {}
+        self._sequence = 0
+        self._pending_since: float | None = None
+        self._pending_max_frame: int | None = None
+        self._saved_frame_index: int | None = None
+        self._flush_error: BaseException | None = None
+        self._closed = False
+        self.metadata = session_metadata(
+            source=source,
+            fps=self.fps,
+            fps_given=fps is not None,
+            params=params,
+            scene_path=scene_path,
+            embed_frames=self.embed_frames,
+            record_maps=self.record_maps,
+            flush_interval=self.flush_interval,
+            resumed_from=resumed_from,
+        )
+        self._start(None if scene_path is None else Path(scene_path).name, scene_bytes)
+        self._stop = threading.Event()
+        self._flusher = threading.Thread(
+            target=self._flush_loop, name=f"session-flush-{self.path.name}", daemon=True
+        )
+        self._flusher.start()
+
+    @classmethod
+    def create(
+        cls,
+        directory: str | Path,
+        *,
+        source: str,
+        tracker_params: TrackerParams | Mapping[str, Any],
+        name: str | None = None,
+        **options: Any,
+    ) -> SessionRecorder:
+        """A recorder writing a NEW file `<directory>/<UTC timestamp>_<name>.mcap`.
+
+        `name` defaults to the source's file or folder name; a suffix `-2`, `-3`, ... is added
+        when the name is taken. Other keyword options are those of `SessionRecorder(...)`.
+        """
+        directory = Path(directory)
+        try:
+            directory.mkdir(parents=True, exist_ok=True)
+        except OSError as error:
+            raise SessionError(f"cannot create sessions folder {directory}: {error}") from error
+        stem = f"{datetime.now(UTC):%Y%m%d-%H%M%S}_{_safe_name(name or Path(source).name)}"
+        for attempt in range(1, 1000):
+            candidate = directory / (f"{stem}.mcap" if attempt == 1 else f"{stem}-{attempt}.mcap")
+            if candidate.exists():
+                continue
+            try:
+                return cls(candidate, source=source, tracker_params=tracker_params, **options)
+            except _SessionFileExistsError:  # created by someone else in between
+                continue
+        raise SessionError(f"no free session file name for {stem} in {directory}")
+
+    # -- public logging API --------------------------------------------------------------------
+
+    @property
+    def saved_frame_index(self) -> int | None:
+        """Highest frame index with records that reached the OS (survive a crash), or None.
+
+        Records reach the file in the order they were logged, so everything logged before them
+        (all earlier frames, when frames are logged in order) is saved too.
+        """
+        with self._lock:
+            return self._saved_frame_index
+
+    def log_target(
+        self, target_id: str, result: TrackResult, *, landmark_id: str | None = None
+    ) -> None:
+        """Record one target in one frame: box, signals and (if record_maps) the two maps."""
+        target_id = _check_target_id(target_id)
+        rgba = _ABERRANT_RGBA
+        if all(math.isfinite(v) for v in result.box):
+            with self._lock:
+                rgba = self._target_colours.setdefault(
+                    target_id, _PALETTE[len(self._target_colours) % len(_PALETTE)]
+                )
+        time_ns = frame_time_ns(result.frame_index, self.fps)
+        batch = messages.target_messages(
+            time_ns,
+            target_id,
+            result,
+            landmark_id=landmark_id,
+            record_maps=self.record_maps,
+            rgba=_ABERRANT_RGBA if result.aberrant else rgba,
+        )
+        self._write(batch, time_ns, int(result.frame_index))
+
+    def log_no_result(
+        self, target_id: str, frame_index: int, *, landmark_id: str | None = None
+    ) -> None:
+        """Record that a target has no result on `frame_index` any more (it was re-tracked from
+        an earlier frame): the reader keeps the latest record per frame, and this one has no
+        box."""
+        nan = math.nan
+        cleared = TrackResult(
+            frame_index=frame_index,
+            box=(nan, nan, nan, nan),
+            peak_score=nan,
+            response_map=None,
+            local_variation=None,
+            global_variation=nan,
+            theta_ref=nan,
+            theta=nan,
+            aberrant=False,
+            scale_factor=nan,
+            search_box=(nan, nan, nan, nan),
+        )
+        self.log_target(target_id, cleared, landmark_id=landmark_id)
+
+    def log_no_pose(self, frame_index: int, reason: str) -> None:
+        """Record that the pose of `frame_index` no longer holds (`reason` says why)."""
+        self.log_pose(
+            PoseEstimate(
+                frame_index=frame_index,
+                valid=False,
+                rotation=np.full((3, 3), np.nan),
+                position=np.full(3, np.nan),
+                reprojection_errors={},
+                used_landmarks=(),
+                reason=reason,
+            )
+        )
+
+    def log_event(
+        self,
+        kind: str,
+        frame_index: int,
+        target_id: str | None = None,
+        box: Sequence[float] | None = None,
+        **extra: Any,
+    ) -> None:
+        """Record a user edit or session event and flush it at once.
+
+        kind: "box_drawn", "box_corrected", "box_deleted", or another lower_snake_case kind.
+        extra: further JSON-serialisable details (e.g. previous_box=..., reason=...).
+        """
+        if not _EVENT_KIND.match(str(kind)):
+            raise SessionError(f"event kind {kind!r} must be lower_snake_case, e.g. 'box_drawn'")
+        if target_id is not None:
+            target_id = _check_target_id(target_id)
+        time_ns = frame_time_ns(frame_index, self.fps)
+        message = messages.event_message(
+            time_ns, str(kind), int(frame_index), target_id, box, extra, wall_time=time.time()
+        )
+        self._write([message], time_ns, int(frame_index), flush_now=True)
+
+    def log_pose(self, pose: messages.PoseLike) -> None:
+        """Record the camera pose of one frame: quality always; PoseInFrame and /tf when valid.
+
+        `pose` is an autotrack.result.PoseEstimate or any object with its attributes:
+        frame_index, valid, rotation (camera-to-world), position, reprojection_errors,
+        used_landmarks, reason and quaternion_xyzw().
+        """
+        frame_index = int(pose.frame_index)
+        time_ns = frame_time_ns(frame_index, self.fps)
+        self._write(messages.pose_messages(time_ns, pose), time_ns, frame_index)
+
+    def log_frame(self, frame_index: int, image_rgb: np.ndarray) -> bool:
+        """Record a video frame as JPEG (foxglove.CompressedImage) if embed_frames is on.
+
+        Returns True when the frame was recorded, False when embedding is off.
+        """
+        if not self.embed_frames:
+            return False
+        import cv2
+
+        image = np.asarray(image_rgb)
+        if image.dtype != np.uint8 or image.ndim not in (2, 3):
+            raise SessionError("log_frame needs a uint8 HxW or HxWx3 RGB image")
+        bgr = image if image.ndim == 2 else cv2.cvtColor(image, cv2.COLOR_RGB2BGR)
+        ok, encoded = cv2.imencode(".jpg", bgr, [cv2.IMWRITE_JPEG_QUALITY, self.jpeg_quality])
+        if not ok:
+            raise SessionError(f"frame {frame_index}: JPEG encoding failed")
+        time_ns = frame_time_ns(frame_index, self.fps)
+        message = messages.compressed_image(time_ns, CAMERA_FRAME, encoded.tobytes(), "jpeg")
+        self._write([(Topics.IMAGE, message)], time_ns, int(frame_index))
+        return True
+
+    def log_landmarks(
+        self, scene: Any, *, frame_index: int = 0, marker_size: float | None = None
+    ) -> None:
+        """Record the scene's landmarks (foxglove.SceneUpdate in the world frame).
+
+        `scene` is an autotrack.localization.scene.Scene (its `landmarks`), a mapping
+        id -> (x, y, z), or an iterable of objects with `id` and `position`. Spheres are
+        `marker_size` across (default 2% of the landmarks' extent).
+        """
+        landmarks = messages.landmark_positions(scene)
+        if marker_size is None:
+            points = np.array([p for _, p in landmarks]) if landmarks else np.zeros((1, 3))
+            extent = float(np.linalg.norm(points.max(axis=0) - points.min(axis=0)))
+            marker_size = 0.02 * extent if extent > 0 else 0.1
+        time_ns = frame_time_ns(frame_index, self.fps)
+        update = messages.landmark_scene_update(time_ns, WORLD_FRAME, landmarks, marker_size)
+        self._write([(Topics.LANDMARKS, update)], time_ns, None, flush_now=True)
+
+    def flush(self) -> None:
+        """Hand everything recorded so far to the OS now."""
+        with self._lock:
+            self._raise_if_unusable()
+            self._flush_locked()
+
+    def close(self) -> None:
+        """Write the summary and footer and close the file. Safe to call twice."""
+        if self._closed:
+            return
+        self._stop.set()
+        self._flusher.join()
+        with self._lock:
+            self._closed = True
+            try:
+                self._writer.finish()
+                self._file.flush()
+                if self._fsync:
+                    os.fsync(self._file.fileno())
+            except OSError as error:
+                raise SessionError(f"cannot finish session file {self.path}: {error}") from error
+            finally:
+                self._file.close()
+
+    def __enter__(self) -> SessionRecorder:
+        return self
+
+    def __exit__(
+        self,
+        exc_type: type[BaseException] | None,
+        exc: BaseException | None,
+        traceback: TracebackType | None,
+    ) -> None:
+        self.close()
+
+    # -- internals -----------------------------------------------------------------------------
+
+    def _start(self, scene_name: str | None, scene_bytes: bytes | None) -> None:
+        """Header, metadata record and the scene attachment, handed to the OS at once."""
+        try:
+            self._writer.start(profile="", library=f"autotrack-studio {autotrack.__version__}")
+            self._writer.add_metadata(SESSION_METADATA_NAME, self.metadata)
+            if scene_bytes is not None:
+                now = time.time_ns()
+                self._writer.add_attachment(
+                    now, 0, scene_name, "application/octet-stream", scene_bytes
+                )
+            self._writer.flush()
+        except OSError as error:
+            self._file.close()
+            raise SessionError(f"cannot write session file {self.path}: {error}") from error
+
+    def _raise_if_unusable(self) -> None:
+        if self._closed:
+            raise SessionError(f"session {self.path.name} is closed")
+        if self._flush_error is not None:
+            raise SessionError(
+                f"writing session {self.path} failed: {self._flush_error}"
+            ) from self._flush_error
+
+    def _channel_id(self, topic: Topic) -> int:
+        channel_id = self._channel_ids.get(topic.name)
+        if channel_id is None:
+            schema_id = self._schema_ids.get(topic.schema)
+            if schema_id is None:
+                schema_id = self._writer.register_schema(
+                    topic.schema, SCHEMA_ENCODING, schema_bytes(topic.schema)
+                )
+                self._schema_ids[topic.schema] = schema_id
+            channel_id = self._writer.register_channel(topic.name, MESSAGE_ENCODING, schema_id)
+            self._channel_ids[topic.name] = channel_id
+        return channel_id
+
+    def _write(
+        self,
+        batch: list[messages.Message],
+        time_ns: int,
+        frame_index: int | None,
+        *,
+        flush_now: bool = False,
+    ) -> None:
+        encoded = [(topic, encode_json(payload)) for topic, payload in batch]
+        with self._lock:
+            self._raise_if_unusable()
+            publish_ns = time.time_ns()
+            try:
+                for topic, data in encoded:
+                    self._sequence += 1
+                    self._writer.add_message(
+                        self._channel_id(topic),
+                        time_ns,
+                        data,
+                        publish_ns,
+                        sequence=self._sequence,
+                    )
+                now = time.monotonic()
+                if self._pending_since is None:
+                    self._pending_since = now
+                if frame_index is not None:
+                    self._pending_max_frame = max(self._pending_max_frame or 0, frame_index)
+                if flush_now or now - self._pending_since >= self.flush_interval:
+                    self._flush_locked()
+            except OSError as error:
+                self._flush_error = error
+                raise SessionError(f"writing session {self.path} failed: {error}") from error
+
+    def _flush_locked(self) -> None:
+        self._writer.flush()
+        if self._fsync:
+            os.fsync(self._file.fileno())
+        if self._pending_max_frame is not None:
+            self._saved_frame_index = max(self._saved_frame_index or 0, self._pending_max_frame)
+        self._pending_since = None
+        self._pending_max_frame = None
+
+    def _flush_loop(self) -> None:
+        timeout = self.flush_interval
+        while not self._stop.wait(timeout):
+            with self._lock:
+                if self._closed or self._flush_error is not None:
+                    return
+                timeout = self.flush_interval
+                if self._pending_since is None:
+                    continue
+                due = self._pending_since + self.flush_interval - time.monotonic()
+                if due > 0:
+                    timeout = due
+                    continue
+                try:
+                    self._flush_locked()
+                except OSError as error:
+                    self._flush_error = error
+                    return
+
+
+class _SessionFileExistsError(SessionError):
+    """The session file to create already exists."""
+
+
+def _read_scene(scene_path: str | Path) -> bytes:
+    try:
+        return Path(scene_path).read_bytes()
+    except OSError as error:
+        raise SessionError(f"cannot read scene file {scene_path}: {error}") from error
+
+
+def _create_file(path: Path) -> BinaryIO:
+    """A new file opened for writing; an existing file is never overwritten."""
+    try:
+        return open(path, "xb")  # noqa: SIM115 - closed by the recorder's close()
+    except FileExistsError as error:
+        raise _SessionFileExistsError(
+            f"{path} already exists; session files are never overwritten"
+        ) from error
+    except OSError as error:
+        raise SessionError(f"cannot create session file {path}: {error}") from error

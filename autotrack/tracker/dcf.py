@@ -1,0 +1,306 @@
+"""The correlation filter: label, window, ADMM training and detection.
+
+All spectra are real-input half spectra (`scipy.fft.rfft2` over the two grid axes, the last grid
+axis halved). Every operation of the release is per frequency or a real-valued spatial product,
+so the half spectrum gives the same filter as the release's full complex spectrum (up to float
+rounding and the Nyquist bin, which a real signal forces to be real).
+
+Arrays are laid out (channels, rows, cols) on the cell grid, float32 / complex64, so that every
+FFT runs over contiguous memory.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import pyfftw
+import scipy.fft
+from numba import njit
+
+_FFT_AXES = (-2, -1)
+
+
+def matlab_round(values: np.ndarray | float) -> np.ndarray:
+    """MATLAB's round: halves away from zero (numpy rounds halves to even)."""
+    values = np.asarray(values, dtype=np.float64)
+    return np.sign(values) * np.floor(np.abs(values) + 0.5)
+
+
+def centred_frequencies(n: int) -> np.ndarray:
+    """Integer frequencies/offsets in FFT order: 0, 1, ..., ceil((n-1)/2), -floor((n-1)/2), ..., -1."""
+    half = (n - 1) // 2
+    return np.roll(np.arange(-half, n - half), -half).astype(np.float64)
+
+
+def gaussian_label(grid_size: tuple[int, int], sigma: float) -> np.ndarray:
+    """Desired response y: a 2-D Gaussian on the cell grid with its peak at the origin (eq. 1)."""
+    rows = centred_frequencies(grid_size[0])[:, None]
+    cols = centred_frequencies(grid_size[1])[None, :]
+    return np.exp(-0.5 * (rows**2 + cols**2) / sigma**2)
+
+
+def cosine_window(grid_size: tuple[int, int]) -> np.ndarray:
+    """Hann window of the release: MATLAB hann(n + 2) without its two zero end points."""
+
+    def hann_inner(n: int) -> np.ndarray:
+        k = np.arange(1, n + 1)
+        return 0.5 * (1.0 - np.cos(2.0 * np.pi * k / (n + 1)))
+
+    return np.outer(hann_inner(grid_size[0]), hann_inner(grid_size[1])).astype(np.float32)
+
+
+def to_spectrum(features: np.ndarray) -> np.ndarray:
+    """Half spectrum of real maps (..., rows, cols) -> complex64 (..., rows, cols // 2 + 1)."""
+    return scipy.fft.rfft2(features, axes=_FFT_AXES, workers=1).astype(np.complex64, copy=False)
+
+
+def from_spectrum(spectrum: np.ndarray, grid_size: tuple[int, int]) -> np.ndarray:
+    """Real maps from half spectra (the inverse of `to_spectrum`)."""
+    return scipy.fft.irfft2(spectrum, s=grid_size, axes=_FFT_AXES, workers=1)
+
+
+class SpectrumTransform:
+    """Planned FFTW real transforms of (channels, rows, cols) float32 maps, one thread.
+
+    The hot path of a tracker runs 2 * admm_iterations - 1 multi-channel transforms per frame
+    of a fixed shape; FFTW plans made once per tracker are about twice as fast as pocketfft.
+    Plans are estimated, not measured: measured plans (FFTW_MEASURE/PATIENT, 1.3-1.8x faster
+    on 50 x 50 grids) depend on the timings of the moment, and a different plan rounds
+    differently, which this chaotic tracker turns into different boxes from run to run.
+    """
+
+    def __init__(self, channels: int, grid_size: tuple[int, int]) -> None:
+        self.grid_size = grid_size
+        rows, cols = grid_size
+        self._forward = pyfftw.builders.rfft2(
+            np.empty((channels, rows, cols), np.float32),
+            axes=_FFT_AXES,
+            threads=1,
+            planner_effort="FFTW_ESTIMATE",
+        )
+        self._inverse = pyfftw.builders.irfft2(
+            np.empty((channels, rows, cols // 2 + 1), np.complex64),
+            s=grid_size,
+            axes=_FFT_AXES,
+            threads=1,
+            planner_effort="FFTW_ESTIMATE",
+        )
+        self._spectrum_shape = (channels, rows, cols // 2 + 1)
+
+    def forward(self, maps: np.ndarray) -> np.ndarray:
+        """Half spectra of real maps (a new complex64 array)."""
+        out = pyfftw.empty_aligned(self._spectrum_shape, np.complex64)
+        return self._forward(maps, out)
+
+    def inverse_scratch(self, spectrum: np.ndarray) -> np.ndarray:
+        """Real maps of half spectra, in a buffer the next `inverse_scratch` call overwrites."""
+        return self._inverse(spectrum)
+
+
+def half_spectrum_weights(grid_size: tuple[int, int]) -> np.ndarray:
+    """Multiplicity of each half-spectrum column in the full spectrum (for sums of |.|^2)."""
+    n_cols = grid_size[1] // 2 + 1
+    weights = np.full(n_cols, 2.0, dtype=np.float32)
+    weights[0] = 1.0
+    if grid_size[1] % 2 == 0:
+        weights[-1] = 1.0
+    return weights
+
+
+@dataclass(frozen=True)
+class AdmmSettings:
+    """Fixed settings of the ADMM solver (paper section 4.2)."""
+
+    iterations: int
+    lambda_spatial: float
+    gamma_init: float
+    gamma_step: float
+    gamma_max: float
+
+
+@njit(cache=True, nogil=True, fastmath=False)
+def _g_step_kernel(xf, yf, h_f, l_f, g_prev, s_xx, s_gx_prev, gamma, theta, num_cells, g_out):
+    # Loops run channel-outermost so every array is read contiguously.
+    channels, rows, cols = xf.shape
+    scale = np.float32(1.0 / (gamma + theta))
+    t_scale = np.float32(scale / num_cells)
+    gamma_scale = np.float32(gamma * scale)
+    theta_scale = np.float32(theta * scale)
+    cells_penalty = np.float32(num_cells * (gamma + theta))
+    s_hx = np.zeros((rows, cols), np.complex64)
+    s_lx = np.zeros((rows, cols), np.complex64)
+    for k in range(channels):
+        for r in range(rows):
+            for c in range(cols):
+                x_conj = np.conj(xf[k, r, c])
+                s_hx[r, c] += x_conj * h_f[k, r, c]
+                s_lx[r, c] += x_conj * l_f[k, r, c]
+    # x^H rho / ((gamma + theta) B), with B = x^H x + T (gamma + theta)
+    projection = np.empty((rows, cols), np.complex64)
+    for r in range(rows):
+        for c in range(cols):
+            projection[r, c] = (
+                t_scale * s_xx[r, c] * yf[r, c]
+                + theta_scale * s_gx_prev[r, c]
+                - scale * s_lx[r, c]
+                + gamma_scale * s_hx[r, c]
+            ) / (s_xx[r, c] + cells_penalty)
+    for k in range(channels):
+        for r in range(rows):
+            for c in range(cols):
+                x = xf[k, r, c]
+                g_out[k, r, c] = (
+                    t_scale * yf[r, c] * x
+                    - scale * l_f[k, r, c]
+                    + gamma_scale * h_f[k, r, c]
+                    + theta_scale * g_prev[k, r, c]
+                    - x * projection[r, c]
+                )
+
+
+def solve_g_step(
+    xf: np.ndarray,
+    yf: np.ndarray,
+    h_f: np.ndarray,
+    l_f: np.ndarray,
+    g_prev: np.ndarray,
+    s_xx: np.ndarray,
+    s_gx_prev: np.ndarray,
+    gamma: float,
+    theta: float,
+    num_cells: int,
+) -> np.ndarray:
+    """Sherman-Morrison closed form of the g-subproblem, per frequency (eqs. 10-11).
+
+    Per frequency j it solves (x x^H / T + (gamma + theta) I) g = y x / T - l + gamma h +
+    theta g_prev, written as the release writes it (l is its scaled multiplier, T = num_cells).
+    `s_xx` = sum_k |x_k|^2 and `s_gx_prev` = sum_k conj(x_k) g_prev_k are constant within a
+    frame and passed in precomputed.
+    """
+    g_f = np.empty_like(xf)
+    _g_step_kernel(
+        xf, yf, h_f, l_f, g_prev, s_xx, s_gx_prev, float(gamma), float(theta), num_cells, g_f
+    )
+    return g_f
+
+
+def solve_h_step(
+    g_f: np.ndarray,
+    l_f: np.ndarray,
+    spatial_window: np.ndarray,
+    gamma: float,
+    lambda_spatial: float,
+    transform: SpectrumTransform,
+) -> np.ndarray:
+    """Closed form of the h-subproblem in the spatial domain, returned as a half spectrum (eq. 12)."""
+    num_cells = transform.grid_size[0] * transform.grid_size[1]
+    gain = (num_cells / (lambda_spatial * spatial_window**2 + gamma * num_cells)).astype(np.float32)
+    h = transform.inverse_scratch(np.float32(gamma) * (g_f + l_f))
+    h *= gain
+    return transform.forward(h)
+
+
+def train_filter(
+    xf: np.ndarray,
+    yf: np.ndarray,
+    g_prev: np.ndarray,
+    spatial_window: np.ndarray,
+    theta_start: float,
+    settings: AdmmSettings,
+    transform: SpectrumTransform,
+    theta_of_filter=None,
+) -> tuple[np.ndarray, float]:
+    """ADMM on the AutoTrack objective (eqs. 5-15); returns the filter and the last theta used.
+
+    `theta_of_filter(g_f, iteration)` re-estimates theta after the g/h steps of an iteration
+    (eq. 13); it returns None to keep theta unchanged.
+    """
+    num_cells = transform.grid_size[0] * transform.grid_size[1]
+    g_f = np.zeros_like(xf)
+    h_f = np.zeros_like(xf)
+    l_f = np.zeros_like(xf)
+    s_xx = np.sum((xf.real**2 + xf.imag**2), axis=0).astype(np.float32)
+    s_gx_prev = np.sum(np.conj(xf) * g_prev, axis=0)
+    gamma = float(settings.gamma_init)
+    theta = float(theta_start)
+    for iteration in range(1, settings.iterations + 1):
+        g_f = solve_g_step(xf, yf, h_f, l_f, g_prev, s_xx, s_gx_prev, gamma, theta, num_cells)
+        if iteration == settings.iterations:
+            break  # the last h, theta and multiplier updates would not be used
+        h_f = solve_h_step(g_f, l_f, spatial_window, gamma, settings.lambda_spatial, transform)
+        if theta_of_filter is not None:
+            new_theta = theta_of_filter(g_f, iteration)
+            if new_theta is not None:
+                theta = float(new_theta)
+        l_f += np.float32(gamma) * (g_f - h_f)  # eq. 14
+        gamma = min(settings.gamma_step * gamma, settings.gamma_max)
+    return g_f, theta
+
+
+def detection_response(g_f: np.ndarray, zf: np.ndarray, grid_size: tuple[int, int]) -> np.ndarray:
+    """Response map R = F^-1 sum_k conj(g_k) z_k (eq. 16), real, peak at the origin if no motion."""
+    response_f = np.einsum("krc,krc->rc", np.conj(g_f), zf)
+    return from_spectrum(response_f, grid_size)
+
+
+def newton_peak(response: np.ndarray, iterations: int) -> tuple[float, float, float]:
+    """Sub-pixel peak of a response map by Newton's method on its Fourier series.
+
+    Starts at the integer maximum; keeps it if Newton lowers the interpolated score.
+    Returns (row displacement, col displacement, peak score) in cells, displacements wrapped to
+    [-n/2, n/2).
+    """
+    rows, cols = response.shape
+    response_f = scipy.fft.fft2(response, workers=1)
+    peak_index = int(np.argmax(response))
+    peak_row, peak_col = divmod(peak_index, cols)
+    init_score = float(response[peak_row, peak_col])
+    row_half = (rows - 1) // 2
+    col_half = (cols - 1) // 2
+    trans_row = (peak_row + row_half) % rows - row_half
+    trans_col = (peak_col + col_half) % cols - col_half
+    init_y = 2.0 * np.pi * trans_row / rows
+    init_x = 2.0 * np.pi * trans_col / cols
+    ky = centred_frequencies(rows)
+    kx = centred_frequencies(cols)
+    pos_y, pos_x = init_y, init_x
+    exp_iky = np.exp(1j * ky * pos_y)
+    exp_ikx = np.exp(1j * kx * pos_x)
+    for _ in range(iterations):
+        y_resp = exp_iky @ response_f
+        resp_x = response_f @ exp_ikx
+        grad_y = -np.imag((ky * exp_iky) @ resp_x)
+        grad_x = -np.imag(y_resp @ (kx * exp_ikx))
+        ival = 1j * (exp_iky @ resp_x)
+        h_yy = np.real(-((ky**2) * exp_iky) @ resp_x + ival)
+        h_xx = np.real(-y_resp @ ((kx**2) * exp_ikx) + ival)
+        h_xy = np.real(-((ky * exp_iky) @ (response_f @ (kx * exp_ikx))))
+        det = h_yy * h_xx - h_xy * h_xy
+        if det == 0.0 or not np.isfinite(det):
+            break
+        pos_y = pos_y - (h_xx * grad_y - h_xy * grad_x) / det
+        pos_x = pos_x - (h_yy * grad_x - h_xy * grad_y) / det
+        exp_iky = np.exp(1j * ky * pos_y)
+        exp_ikx = np.exp(1j * kx * pos_x)
+    score = float(np.real(exp_iky @ response_f @ exp_ikx)) / (rows * cols)
+    if not np.isfinite(score) or score < init_score:
+        pos_y, pos_x, score = init_y, init_x, init_score
+    disp_row = (np.mod(pos_y + np.pi, 2.0 * np.pi) - np.pi) / (2.0 * np.pi) * rows
+    disp_col = (np.mod(pos_x + np.pi, 2.0 * np.pi) - np.pi) / (2.0 * np.pi) * cols
+    return float(disp_row), float(disp_col), score
+
+
+def shift_spectrum(
+    xf: np.ndarray, shift_rows: float, shift_cols: float, grid_size: tuple[int, int]
+) -> np.ndarray:
+    """Translate feature maps by (shift_rows, shift_cols) cells in the Fourier domain.
+
+    Used to train on the detection features moved to the new target position instead of
+    extracting a new patch (release behaviour).
+    """
+    ky = centred_frequencies(grid_size[0])
+    kx = np.arange(xf.shape[-1], dtype=np.float64)
+    phase_rows = np.exp(1j * (2.0 * np.pi * shift_rows / grid_size[0]) * ky).astype(np.complex64)
+    phase_cols = np.exp(1j * (2.0 * np.pi * shift_cols / grid_size[1]) * kx).astype(np.complex64)
+    return xf * (phase_rows[:, None] * phase_cols[None, :])

@@ -1,0 +1,451 @@
+"""The tracker's feature stack on a grid of cell x cell pixels: grey, fHOG and a colour feature.
+
+Channel order follows the AutoTrack release: grey (1), fHOG (31), colour (10) for colour
+patches; grey and fHOG (32) for grey patches. Everything is float32 of shape
+(H // cell, W // cell, K); pixels past the last whole cell are dropped, as the release's
+`average_feature_region` and `fhog` do.
+
+Colour features:
+- 'table': the published Color Names lookup (van de Weijer et al. 2009, normalised 10-D form of
+  Danelljan et al. 2014), loaded by the user from a file; it is research data, not ours.
+- 'lab11' (default): our own soft assignment of each pixel's CIELAB colour to the 11 English
+  basic colour terms, with prototypes from the xkcd colour survey (see `COLOUR_PROTOTYPES`),
+  projected onto the 10-D subspace orthogonal to the all-ones vector. It is built from colour
+  science alone, never from the published table.
+"""
+
+from __future__ import annotations
+
+from functools import lru_cache
+from pathlib import Path
+
+import numpy as np
+import scipy.io
+import scipy.linalg
+from numba import njit
+
+from autotrack.errors import InputError
+from autotrack.params import TrackerParams
+from autotrack.tracker.fhog import fhog, fhog_batch, fhog_channels
+
+GREY_CHANNELS = 1
+FHOG_CHANNELS = fhog_channels(9) - 1  # the toolbox's all-zero truncation channel is dropped
+COLOUR_CHANNELS = 10
+COLOUR_TABLE_ROWS = 32 * 32 * 32
+SCALE_FEATURE_CELL = 4
+"""The release's scale filter always takes fHOG at cell 4 of its resampled samples."""
+
+RGB2GRAY_WEIGHTS = np.array([0.298936021293775, 0.587043074451121, 0.114020904255103])
+"""MATLAB rgb2gray's weights on R, G, B (the luma row of the inverse NTSC YIQ transform)."""
+
+COLOUR_TERMS = (
+    "black", "blue", "brown", "grey", "green", "orange", "pink", "purple", "red", "white", "yellow",
+)  # fmt: skip
+"""The 11 English basic colour terms (Berlin & Kay 1969), in the Color Names table's order."""
+
+COLOUR_PROTOTYPES: dict[str, tuple[str, ...]] = {
+    "black": ("000000",),
+    "blue": ("0343df", "95d0fc", "00035b"),
+    "brown": ("653700", "ad8150", "341c02"),
+    "grey": ("929591", "d8dcd6", "363737"),
+    "green": ("15b01a", "96f97b", "033500"),
+    "orange": ("f97306", "fdaa48", "c65102"),
+    "pink": ("ff81c0", "ffd1df", "cb416b"),
+    "purple": ("7e1e9c", "bf77f6", "35063e"),
+    "red": ("e50000", "ff474c", "840000"),
+    "white": ("ffffff",),
+    "yellow": ("ffff14", "fffe7a", "d5b60a"),
+}
+"""sRGB prototypes per term: the colours the xkcd colour survey (R. Munroe, 2010; about 200,000
+participants naming random monitor colours; results public domain) gives for the names 'T',
+'light T' and 'dark T' of each basic term T ('black' and 'white' have no variants). Several
+prototypes per term cover its lightness range, which a single focal colour does not (dark red
+would otherwise fall to brown, navy to purple)."""
+
+LAB11_SIGMA = 12.0
+"""Width (CIELAB Delta E*ab) of the Gaussian kernel on the distance to a term's nearest prototype.
+The median distance from a prototype to the nearest prototype of another term is 32; at sigma 12
+such a neighbour keeps a weight exp(-32^2 / (2 * 12^2)) ~ 0.03, so assignments are soft between
+neighbouring terms and close to one-hot at a prototype."""
+
+_D65_WHITE = np.array([0.95047, 1.0, 1.08883])
+_SRGB_TO_XYZ = np.array(
+    [
+        [0.4124564, 0.3575761, 0.1804375],
+        [0.2126729, 0.7151522, 0.0721750],
+        [0.0193339, 0.1191920, 0.9503041],
+    ]
+)  # IEC 61966-2-1 (sRGB) primaries, D65
+
+
+# -- cell averaging and the grey channel ---------------------------------------------------------
+
+
+def _as_channels(array: np.ndarray) -> np.ndarray:
+    array = np.asarray(array)
+    if array.ndim == 2:
+        return array[:, :, None]
+    if array.ndim != 3:
+        raise InputError(f"expected an H x W or H x W x K array, got shape {array.shape}")
+    return array
+
+
+def _check_cell(cell_size: int) -> int:
+    if int(cell_size) != cell_size or cell_size < 1:
+        raise InputError(f"cell size must be a positive integer, got {cell_size}")
+    return int(cell_size)
+
+
+@njit(cache=True, nogil=True, fastmath=False, error_model="numpy")
+def _cell_means(values, cell, out):
+    """Block means of (H, W, K) values into (H//cell, W//cell, K), accumulated in float32."""
+    rows, cols, depth = out.shape
+    width = cols * cell * depth
+    band = np.empty(width, np.float32)
+    scale = np.float32(1.0) / np.float32(cell * cell)
+    for row in range(rows):
+        first = values[row * cell].reshape(-1)[:width]
+        for i in range(width):
+            band[i] = np.float32(first[i])
+        for y in range(row * cell + 1, (row + 1) * cell):
+            line = values[y].reshape(-1)[:width]
+            for i in range(width):  # whole rows at a time: contiguous, vectorised
+                band[i] += np.float32(line[i])
+        for col in range(cols):
+            for k in range(depth):
+                total = np.float32(0.0)
+                for dx in range(cell):
+                    total += band[(col * cell + dx) * depth + k]
+                out[row, col, k] = total * scale
+
+
+def cell_average(channels: np.ndarray, cell_size: int) -> np.ndarray:
+    """Mean over non-overlapping cell x cell blocks from the top-left (average_feature_region).
+
+    H x W or H x W x K of any real dtype in, float32 (H // cell, W // cell, K) out; trailing rows
+    and columns that do not fill a whole cell are dropped.
+    """
+    cell = _check_cell(cell_size)
+    values = _as_channels(channels)
+    if values.dtype != np.uint8 and values.dtype != np.float32:
+        if not np.issubdtype(values.dtype, np.number) or np.iscomplexobj(values):
+            raise InputError(f"cell_average needs real numbers, got dtype {values.dtype}")
+        values = values.astype(np.float32)
+    values = np.ascontiguousarray(values)
+    height, width, depth = values.shape
+    out = np.empty((height // cell, width // cell, depth), np.float32)
+    _cell_means(values, cell, out)
+    return out
+
+
+def is_grey(frame: np.ndarray) -> bool:
+    """True for a 2-D (or single-channel) frame, or one whose first two channels are identical.
+
+    Like the release (`all(all(im(:,:,1) == im(:,:,2)))`), only channels 0 and 1 are compared:
+    grey images stored as RGB repeat one plane three times, and a single comparison is cheap.
+    """
+    array = np.asarray(frame)
+    if array.ndim == 2 or (array.ndim == 3 and array.shape[2] == 1):
+        return True
+    if array.ndim != 3 or array.shape[2] < 2:
+        raise InputError(f"expected an H x W or H x W x C image, got shape {array.shape}")
+    return bool(np.array_equal(array[:, :, 0], array[:, :, 1]))
+
+
+def grey_feature(patch: np.ndarray, cell_size: int) -> np.ndarray:
+    """MATLAB `rgb2gray(single(patch) / 255) - 0.5` averaged over cells -> (H//c, W//c, 1).
+
+    `patch` is RGB (H x W x 3) or single-channel (H x W), 0..255 scale.
+    """
+    values = _as_channels(patch)
+    if values.shape[2] == 3:
+        # rgb2gray is linear, so averaging first and weighting after is the same number.
+        means = cell_average(values, cell_size)
+        grey = means @ (RGB2GRAY_WEIGHTS / 255.0).astype(np.float32)
+        return (grey - np.float32(0.5))[:, :, None]
+    if values.shape[2] != 1:
+        raise InputError(f"grey feature needs 1 or 3 channels, got {values.shape[2]}")
+    return cell_average(values, cell_size) / np.float32(255.0) - np.float32(0.5)
+
+
+# -- colour lookup tables ------------------------------------------------------------------------
+
+
+@njit(cache=True, nogil=True, fastmath=False, error_model="numpy")
+def _lookup_cell_average(patch, table, cell, out):
+    """Cell means of table[R//8 + 32 (G//8) + 1024 (B//8)] over an RGB uint8 patch."""
+    rows, cols, depth = out.shape
+    width = cols * cell
+    index = np.empty(width, np.int64)
+    accumulator = np.zeros((cols, depth), np.float32)
+    scale = np.float32(1.0) / np.float32(cell * cell)
+    for row in range(rows):
+        accumulator[:] = 0.0
+        for y in range(row * cell, (row + 1) * cell):
+            line = patch[y]
+            for x in range(width):
+                index[x] = (
+                    (np.int64(line[x, 0]) >> 3)
+                    + ((np.int64(line[x, 1]) >> 3) << 5)
+                    + ((np.int64(line[x, 2]) >> 3) << 10)
+                )
+            for col in range(cols):
+                target = accumulator[col]
+                for dx in range(cell):
+                    source = table[index[col * cell + dx]]
+                    for k in range(depth):
+                        target[k] += source[k]
+        for col in range(cols):
+            for k in range(depth):
+                out[row, col, k] = accumulator[col, k] * scale
+
+
+def _as_rgb_uint8(patch: np.ndarray) -> np.ndarray:
+    array = np.asarray(patch)
+    if array.ndim != 3 or array.shape[2] != 3:
+        raise InputError(f"a colour feature needs an H x W x 3 RGB patch, got shape {array.shape}")
+    if array.dtype != np.uint8:
+        if not np.issubdtype(array.dtype, np.number) or np.iscomplexobj(array):
+            raise InputError(f"a colour patch must be real-valued, got dtype {array.dtype}")
+        # floor(value / 8) of the release, for values already on the 0..255 scale
+        array = np.clip(np.floor(array), 0, 255).astype(np.uint8)
+    return np.ascontiguousarray(array)
+
+
+def colour_table_feature(patch_rgb_uint8: np.ndarray, table: np.ndarray, cell: int) -> np.ndarray:
+    """Cell means of a 32768-row colour table indexed by R//8 + 32*(G//8) + 1024*(B//8)."""
+    cell = _check_cell(cell)
+    rgb = _as_rgb_uint8(patch_rgb_uint8)
+    lookup = np.asarray(table)
+    if lookup.ndim != 2 or lookup.shape[0] != COLOUR_TABLE_ROWS:
+        raise InputError(
+            f"a colour table must have {COLOUR_TABLE_ROWS} rows (one per RGB bin), got shape {lookup.shape}"
+        )
+    lookup = np.ascontiguousarray(lookup, dtype=np.float32)
+    out = np.empty((rgb.shape[0] // cell, rgb.shape[1] // cell, lookup.shape[1]), np.float32)
+    _lookup_cell_average(rgb, lookup, cell, out)
+    return out
+
+
+def load_colour_table(path: str | Path) -> np.ndarray:
+    """Read a 32768 x 10 Color Names table from `.npy` or `.mat` -> float32, C-contiguous.
+
+    In a `.mat` file the variable `CNnorm` (the release's name) is used when present, otherwise
+    the only 32768 x 10 (or 10 x 32768, transposed) numeric array.
+    """
+    file = Path(path).expanduser()
+    if not file.is_file():
+        problem = "is not a file" if file.exists() else "does not exist"
+        raise InputError(f"colour table {str(file)!r} {problem} (expected a .npy or .mat file)")
+    suffix = file.suffix.lower()
+    if suffix == ".npy":
+        try:
+            table = np.load(file, allow_pickle=False)
+        except (OSError, ValueError) as error:
+            raise InputError(
+                f"colour table {str(file)!r} is not a readable .npy file: {error}"
+            ) from None
+    elif suffix == ".mat":
+        table = _table_from_mat(file)
+    else:
+        raise InputError(
+            f"colour table {str(file)!r}: unknown extension {file.suffix!r}; use .npy or .mat"
+        )
+    table = np.asarray(table)
+    if table.shape == (COLOUR_CHANNELS, COLOUR_TABLE_ROWS):
+        table = table.T
+    if table.shape != (COLOUR_TABLE_ROWS, COLOUR_CHANNELS):
+        raise InputError(
+            f"colour table {str(file)!r} has shape {table.shape}; expected "
+            f"{COLOUR_TABLE_ROWS} x {COLOUR_CHANNELS} (one row per R//8 + 32 G//8 + 1024 B//8 bin)"
+        )
+    if not np.issubdtype(table.dtype, np.number) or np.iscomplexobj(table):
+        raise InputError(f"colour table {str(file)!r} must hold real numbers, got {table.dtype}")
+    table = np.ascontiguousarray(table, dtype=np.float32)
+    if not np.isfinite(table).all():
+        raise InputError(f"colour table {str(file)!r} contains NaN or infinite values")
+    return table
+
+
+def _table_from_mat(file: Path) -> np.ndarray:
+    try:
+        contents = scipy.io.loadmat(file)
+    except (OSError, ValueError, NotImplementedError) as error:
+        raise InputError(
+            f"colour table {str(file)!r} is not a readable MATLAB file (v7.3/HDF5 files are not "
+            f"supported; re-save with save(..., '-v7')): {error}"
+        ) from None
+    arrays = {
+        name: value
+        for name, value in contents.items()
+        if not name.startswith("__") and isinstance(value, np.ndarray) and value.ndim == 2
+        and np.issubdtype(value.dtype, np.number)
+    }  # fmt: skip
+    if "CNnorm" in arrays:
+        return arrays["CNnorm"]
+    shaped = [
+        value
+        for value in arrays.values()
+        if value.shape
+        in ((COLOUR_TABLE_ROWS, COLOUR_CHANNELS), (COLOUR_CHANNELS, COLOUR_TABLE_ROWS))
+    ]
+    if len(shaped) == 1:
+        return shaped[0]
+    found = ", ".join(f"{name} {value.shape}" for name, value in arrays.items()) or "none"
+    raise InputError(
+        f"colour table {str(file)!r}: expected one {COLOUR_TABLE_ROWS} x {COLOUR_CHANNELS} "
+        f"numeric variable (e.g. CNnorm); found {found}"
+    )
+
+
+# -- our own colour feature: CIELAB soft assignment to the 11 basic terms -------------------------
+
+
+def srgb_to_lab(rgb: np.ndarray) -> np.ndarray:
+    """CIELAB (D65) of sRGB values on the 0..255 scale; (..., 3) -> (..., 3) float64."""
+    c = np.asarray(rgb, dtype=np.float64) / 255.0
+    linear = np.where(c <= 0.04045, c / 12.92, ((c + 0.055) / 1.055) ** 2.4)  # IEC 61966-2-1
+    xyz = linear @ _SRGB_TO_XYZ.T / _D65_WHITE
+    delta = 6.0 / 29.0
+    f = np.where(xyz > delta**3, np.cbrt(xyz), xyz / (3 * delta**2) + 4.0 / 29.0)  # CIE 15
+    return np.stack(
+        [
+            116.0 * f[..., 1] - 16.0,
+            500.0 * (f[..., 0] - f[..., 1]),
+            200.0 * (f[..., 1] - f[..., 2]),
+        ],
+        axis=-1,
+    )
+
+
+@lru_cache(maxsize=1)
+def _prototype_lab() -> tuple[np.ndarray, np.ndarray]:
+    """(index of each term's first prototype, CIELAB of the prototypes grouped by term)."""
+    first, colours = [], []
+    for term in COLOUR_TERMS:
+        first.append(len(colours))
+        colours.extend(
+            [int(code[i : i + 2], 16) for i in (0, 2, 4)] for code in COLOUR_PROTOTYPES[term]
+        )
+    return np.array(first), srgb_to_lab(np.array(colours, dtype=np.float64))
+
+
+def colour_term_probabilities(rgb: np.ndarray, sigma: float = LAB11_SIGMA) -> np.ndarray:
+    """Soft assignment of sRGB colours (..., 3), 0..255 scale, to `COLOUR_TERMS` -> (..., 11).
+
+    p_t ∝ exp(-d_t^2 / (2 sigma^2)), d_t the CIELAB distance to term t's nearest prototype.
+    """
+    first, prototypes = _prototype_lab()
+    lab = srgb_to_lab(rgb)
+    squared = (
+        (lab**2).sum(axis=-1, keepdims=True)
+        + (prototypes**2).sum(axis=-1)
+        - 2.0 * lab @ prototypes.T
+    )
+    nearest = np.minimum.reduceat(np.maximum(squared, 0.0), first, axis=-1)
+    logits = -nearest / (2.0 * sigma**2)
+    logits -= logits.max(axis=-1, keepdims=True)
+    weights = np.exp(logits)
+    return weights / weights.sum(axis=-1, keepdims=True)
+
+
+@lru_cache(maxsize=1)
+def lab11_projection() -> np.ndarray:
+    """(10, 11) orthonormal rows spanning the complement of the all-ones vector (Helmert).
+
+    The 11 probabilities sum to one, so projecting onto this basis loses nothing:
+    p = projection.T @ feature + 1/11.
+    """
+    basis = scipy.linalg.helmert(len(COLOUR_TERMS))
+    basis.flags.writeable = False
+    return basis
+
+
+@lru_cache(maxsize=1)
+def lab11_table() -> np.ndarray:
+    """The 'lab11' feature of every 8 x 8 x 8 RGB bin, rows indexed like the Color Names table.
+
+    Evaluated at the bin centres (8 i + 3.5); read-only float32 (32768, 10).
+    """
+    index = np.arange(COLOUR_TABLE_ROWS)
+    centres = np.stack([index % 32, (index // 32) % 32, index // 1024], axis=-1) * 8.0 + 3.5
+    features = colour_term_probabilities(centres) @ lab11_projection().T
+    table = np.ascontiguousarray(features, dtype=np.float32)
+    table.flags.writeable = False
+    return table
+
+
+def lab11_colour_feature(patch_rgb_uint8: np.ndarray, cell: int) -> np.ndarray:
+    """Our default colour feature: cell means of the 'lab11' lookup -> (H//c, W//c, 10)."""
+    return colour_table_feature(patch_rgb_uint8, lab11_table(), cell)
+
+
+lab11_table()  # built once here, at import (tens of ms), so no tracked frame pays for it
+
+
+# -- the stack ----------------------------------------------------------------------------------
+
+
+def feature_dim(params: TrackerParams, colour: bool) -> int:
+    """Number of channels `extract_features` returns for colour (or grey) patches."""
+    channels = GREY_CHANNELS * params.use_grey + FHOG_CHANNELS * params.use_fhog
+    if colour and params.colour_feature != "none":
+        channels += COLOUR_CHANNELS
+    return channels
+
+
+def extract_features(
+    patch: np.ndarray, params: TrackerParams, colour_table: np.ndarray | None
+) -> np.ndarray:
+    """The release's feature stack of one patch -> float32 C-contiguous (H//c, W//c, K).
+
+    `patch` is uint8 RGB (H x W x 3) or grey (H x W); a grey patch gets no colour channels.
+    Order: grey (1), fHOG (31), colour (10), each when enabled in `params`; colour_feature
+    'table' uses `colour_table` (a 32768-row table, see `load_colour_table`).
+    """
+    array = np.asarray(patch)
+    if array.ndim == 3 and array.shape[2] == 1:
+        array = array[:, :, 0]
+    if array.ndim not in (2, 3) or (array.ndim == 3 and array.shape[2] != 3):
+        raise InputError(f"a feature patch must be H x W or H x W x 3, got shape {np.shape(patch)}")
+    colour = array.ndim == 3
+    cell = _check_cell(params.cell_size)
+    if colour and params.colour_feature == "table" and colour_table is None:
+        raise InputError(
+            "colour_feature='table' needs the Color Names table: load it with load_colour_table"
+        )
+    depth = feature_dim(params, colour)
+    if depth == 0:
+        raise InputError("no feature enabled: set use_grey, use_fhog or a colour feature")
+    rows, cols = array.shape[0] // cell, array.shape[1] // cell
+    out = np.empty((rows, cols, depth), dtype=np.float32)
+    channel = 0
+    if params.use_grey:
+        out[:, :, channel : channel + GREY_CHANNELS] = grey_feature(array, cell)
+        channel += GREY_CHANNELS
+    if params.use_fhog:
+        hog = fhog(array, cell)
+        out[:, :, channel : channel + FHOG_CHANNELS] = hog[:, :, :FHOG_CHANNELS]
+        channel += FHOG_CHANNELS
+    if colour and params.colour_feature != "none":
+        if params.colour_feature == "table":
+            out[:, :, channel:] = colour_table_feature(array, colour_table, cell)
+        else:
+            out[:, :, channel:] = lab11_colour_feature(array, cell)
+    return out
+
+
+def scale_features(patches: np.ndarray) -> np.ndarray:
+    """Scale-filter samples: fHOG (cell 4, 31 channels) of each patch, flattened -> (N, D).
+
+    `patches` is (N, h, w) or (N, h, w, 3). Each patch's (h//4, w//4, 31) block is flattened in
+    C order (the release uses MATLAB's column-major order; the scale filter only needs one fixed
+    order).
+    """
+    stack = np.asarray(patches)
+    if stack.ndim not in (3, 4):
+        raise InputError(
+            f"scale samples must be N x h x w or N x h x w x 3, got shape {stack.shape}"
+        )
+    hog = fhog_batch(stack, SCALE_FEATURE_CELL)[..., :FHOG_CHANNELS]
+    return np.ascontiguousarray(hog.reshape(stack.shape[0], -1))

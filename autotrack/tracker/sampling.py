@@ -1,0 +1,109 @@
+"""Image sampling: square search patches and scale samples, border pixels replicated.
+
+Positions are the release's 1-based (row, col) pixel coordinates; patches are resampled with
+OpenCV as the release's mexResize 'auto' does (area averaging when shrinking, bilinear when
+enlarging).
+"""
+
+from __future__ import annotations
+
+import math
+
+import cv2
+import numpy as np
+
+from autotrack.tracker.area_resample import (
+    area_path_is_generic,
+    area_paths_are_generic,
+    area_resize_crop,
+    area_resize_crops,
+)
+
+
+def resize_auto(patch: np.ndarray, size_hw: tuple[int, int]) -> np.ndarray:
+    """Resize to (rows, cols): INTER_AREA when the area shrinks, INTER_LINEAR otherwise."""
+    rows, cols = int(size_hw[0]), int(size_hw[1])
+    if patch.shape[0] == rows and patch.shape[1] == cols:
+        return patch
+    shrinking = rows * cols < patch.shape[0] * patch.shape[1]
+    interpolation = cv2.INTER_AREA if shrinking else cv2.INTER_LINEAR
+    return cv2.resize(patch, (cols, rows), interpolation=interpolation)
+
+
+def crop_replicate(
+    image: np.ndarray, position: tuple[float, float], size_hw: tuple[int, int]
+) -> np.ndarray:
+    """Patch of `size_hw` centred on the 1-based `position`, pixels outside copied from the border.
+
+    Equivalent to the release's index clamping `xs = floor(pos) + (1:sz) - floor(sz/2)`.
+    """
+    rows, cols = max(int(size_hw[0]), 1), max(int(size_hw[1]), 1)
+    height, width = image.shape[:2]
+    top = math.floor(position[0]) - rows // 2  # 0-based first row
+    left = math.floor(position[1]) - cols // 2
+    bottom, right = top + rows, left + cols
+    if top >= 0 and left >= 0 and bottom <= height and right <= width:
+        return image[top:bottom, left:right]
+    if top < height and bottom > 0 and left < width and right > 0:
+        inside = np.ascontiguousarray(
+            image[max(top, 0) : min(bottom, height), max(left, 0) : min(right, width)]
+        )
+        return cv2.copyMakeBorder(
+            inside,
+            max(-top, 0),
+            max(bottom - height, 0),
+            max(-left, 0),
+            max(right - width, 0),
+            cv2.BORDER_REPLICATE,
+        )
+    # Entirely outside the image (a target that left the frame): every pixel is a border one.
+    row_index = np.clip(np.arange(top, bottom), 0, height - 1)
+    col_index = np.clip(np.arange(left, right), 0, width - 1)
+    return image[row_index[:, None], col_index[None, :]]
+
+
+def search_patch(
+    image: np.ndarray,
+    position: tuple[float, float],
+    region_size_hw: tuple[int, int],
+    output_size_hw: tuple[int, int],
+) -> np.ndarray:
+    """The search region around `position` resampled to the filter's fixed patch size."""
+    region = (max(int(region_size_hw[0]), 1), max(int(region_size_hw[1]), 1))
+    output = (int(output_size_hw[0]), int(output_size_hw[1]))
+    if area_path_is_generic(region, output):  # OpenCV's generic area shrink, computed exactly
+        top = math.floor(position[0]) - region[0] // 2
+        left = math.floor(position[1]) - region[1] // 2
+        return area_resize_crop(image, top, left, region, output)
+    patch = crop_replicate(image, position, region_size_hw)
+    return resize_auto(patch, output_size_hw)  # cv2 reads the strided view, no copy
+
+
+def scale_patches(
+    image: np.ndarray,
+    position: tuple[float, float],
+    base_target_size_hw: np.ndarray,
+    scale_factors: np.ndarray,
+    model_size_hw: tuple[int, int],
+) -> np.ndarray:
+    """Patches of the target at each scale, resized to the scale model size: (N, rows, cols[, 3]).
+
+    Each sample equals `resize_auto(crop_replicate(...))`; the ones OpenCV shrinks with its
+    generic area tables (nearly all) are computed together by `area_resample`, bit for bit.
+    """
+    factors = np.asarray(scale_factors, dtype=np.float64)
+    base = np.asarray(base_target_size_hw, dtype=np.float64)
+    sizes = np.maximum(np.floor(base[None, :] * factors[:, None]), 2).astype(np.int64)
+    model = (int(model_size_hw[0]), int(model_size_hw[1]))
+    generic = area_paths_are_generic(sizes, model)
+    tops = math.floor(position[0]) - sizes[:, 0] // 2
+    lefts = math.floor(position[1]) - sizes[:, 1] // 2
+    samples = np.empty((len(factors), *model, *image.shape[2:]), np.uint8)
+    if generic.any():
+        samples[generic] = area_resize_crops(
+            image, tops[generic], lefts[generic], sizes[generic], model
+        )
+    for index in np.flatnonzero(~generic):
+        patch = crop_replicate(image, position, (int(sizes[index, 0]), int(sizes[index, 1])))
+        samples[index] = resize_auto(patch, model)
+    return samples

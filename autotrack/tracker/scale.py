@@ -1,0 +1,125 @@
+"""DSST-style 1-D scale filter over a pyramid of fHOG scale samples (as in the release)."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import scipy.fft
+
+from autotrack.params import TrackerParams
+from autotrack.tracker.features import scale_features
+from autotrack.tracker.sampling import scale_patches
+
+
+def symmetric_hann(n: int) -> np.ndarray:
+    """MATLAB hann(n): symmetric, zero at both ends."""
+    if n == 1:
+        return np.ones(1)
+    k = np.arange(n)
+    return 0.5 * (1.0 - np.cos(2.0 * np.pi * k / (n - 1)))
+
+
+class ScaleFilter:
+    """Scale estimation: a correlation filter along the scale axis, learnt by running average."""
+
+    def __init__(
+        self,
+        params: TrackerParams,
+        initial_target_size_hw: np.ndarray,
+        base_target_size_hw: np.ndarray,
+        search_size_hw: np.ndarray,
+        image_size_hw: tuple[int, int],
+    ) -> None:
+        n = params.num_scales
+        self.params = params
+        self.base_target_size_hw = np.asarray(base_target_size_hw, dtype=np.float64)
+        centre = math.ceil(n / 2)
+        self.scale_steps = params.scale_step ** (centre - np.arange(1, n + 1))
+        offsets = np.arange(1, n + 1) - centre
+        sigma = math.sqrt(n) * params.scale_sigma_factor
+        self.label_f = scipy.fft.fft(np.exp(-0.5 * offsets**2 / sigma**2)).astype(np.complex64)
+        window = symmetric_hann(n + 1)[1:] if n % 2 == 0 else symmetric_hann(n)
+        self.window = window.astype(np.float32)
+        target_area = float(np.prod(initial_target_size_hw))
+        model_factor = 1.0
+        if model_factor**2 * target_area > params.scale_model_max_area:
+            model_factor = math.sqrt(params.scale_model_max_area / target_area)
+        shortest = float(np.min(initial_target_size_hw))
+        if params.scale_model_min_side and model_factor * shortest < params.scale_model_min_side:
+            # autotrack+: keep >= 4 fHOG cells across a thin target (params.scale_model_min_side)
+            model_factor = params.scale_model_min_side / shortest
+        model_size = np.floor(np.asarray(initial_target_size_hw, dtype=np.float64) * model_factor)
+        self.model_size_hw = (max(int(model_size[0]), 4), max(int(model_size[1]), 4))
+        step = params.scale_step
+        self.min_scale = step ** math.ceil(
+            math.log(float(np.max(5.0 / np.asarray(search_size_hw)))) / math.log(step)
+        )
+        self.max_scale = step ** math.floor(
+            math.log(float(np.min(np.asarray(image_size_hw) / self.base_target_size_hw)))
+            / math.log(step)
+        )
+        self._numerator: np.ndarray | None = None
+        self._denominator: np.ndarray | None = None
+        self._samples: np.ndarray | None = None
+
+    def _extract(
+        self, image: np.ndarray, position, scale: float, indices: np.ndarray
+    ) -> np.ndarray:
+        patches = scale_patches(
+            image,
+            position,
+            self.base_target_size_hw,
+            scale * self.scale_steps[indices],
+            self.model_size_hw,
+        )
+        return scale_features(patches) * self.window[indices, None]
+
+    def detect(self, image: np.ndarray, position, scale: float) -> tuple[int, float]:
+        """Best scale index and the new (clamped) scale factor."""
+        all_indices = np.arange(self.params.num_scales)
+        self._samples = self._extract(image, position, scale, all_indices)
+        samples_f = scipy.fft.fft(self._samples, axis=0, workers=1)
+        response = np.real(
+            scipy.fft.ifft(
+                np.sum(self._numerator * samples_f, axis=1)
+                / (self._denominator + self.params.scale_lambda)
+            )
+        )
+        best = int(np.argmax(response))
+        new_scale = scale * float(self.scale_steps[best])
+        return best, float(np.clip(new_scale, self.min_scale, self.max_scale))
+
+    def _shifted_samples(self, image, position, scale: float, best: int) -> np.ndarray:
+        """The release's reuse of the detection samples shifted by the chosen scale index."""
+        n = self.params.num_scales
+        shift = best - math.ceil(n / 2) + 1
+        if shift == 0:
+            return self._samples
+        window = self.window
+        unwindowed = self._samples / (window[:, None] + 1e-5)
+        samples = np.empty_like(self._samples)
+        if shift > 0:
+            samples[: n - shift] = unwindowed[shift:] * window[: n - shift, None]
+            missing = np.arange(n - shift, n)
+        else:
+            samples[-shift:] = unwindowed[: n + shift] * window[-shift:, None]
+            missing = np.arange(0, -shift)
+        samples[missing] = self._extract(image, position, scale, missing)
+        return samples
+
+    def update(self, image: np.ndarray, position, scale: float, best: int | None) -> None:
+        """Learn from samples at `position`/`scale` (first frame: fresh; later: shifted reuse)."""
+        if best is None or self._samples is None:
+            samples = self._extract(image, position, scale, np.arange(self.params.num_scales))
+        else:
+            samples = self._shifted_samples(image, position, scale, best)
+        samples_f = scipy.fft.fft(samples, axis=0, workers=1)
+        numerator = self.label_f[:, None] * np.conj(samples_f)
+        denominator = np.sum(np.real(samples_f * np.conj(samples_f)), axis=1)
+        rate = self.params.scale_learning_rate
+        if self._numerator is None:
+            self._numerator, self._denominator = numerator, denominator
+        else:
+            self._numerator = (1 - rate) * self._numerator + rate * numerator
+            self._denominator = (1 - rate) * self._denominator + rate * denominator

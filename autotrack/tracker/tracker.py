@@ -1,0 +1,397 @@
+"""The AutoTrack tracker: detection, automatic regularisation, ADMM training, scale filter.
+
+Follows the authors' released MATLAB code (AutoTrack_optimized.m) step by step; the comments
+name the paper's equations. Positions are kept in the release's 1-based (row, col) pixel
+coordinates internally and converted to 0-based (x, y, w, h) boxes at the edge.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+
+import cv2
+import numpy as np
+
+from autotrack.errors import BoxError, InputError
+from autotrack.params import TrackerParams
+from autotrack.result import TrackResult
+from autotrack.tracker import dcf, redetect, regularization, robust
+from autotrack.tracker.features import extract_features, feature_dim, is_grey, load_colour_table
+from autotrack.tracker.sampling import search_patch
+from autotrack.tracker.scale import ScaleFilter
+
+
+def validate_box(box: Sequence[float], image_size_wh: tuple[int, int]) -> tuple[float, ...]:
+    """Check an initial (x, y, w, h) box: finite, positive size, centre inside the image."""
+    try:
+        values = tuple(float(v) for v in box)
+    except (TypeError, ValueError) as error:
+        raise BoxError(f"box must be four numbers x, y, w, h; got {box!r}") from error
+    if len(values) != 4 or not all(math.isfinite(v) for v in values):
+        raise BoxError(f"box must be four finite numbers x, y, w, h; got {box!r}")
+    x, y, w, h = values
+    if w < 1 or h < 1:
+        raise BoxError(f"box {values} has zero size: width and height must be at least 1 pixel")
+    width, height = image_size_wh
+    cx, cy = x + w / 2.0, y + h / 2.0
+    if not (0 <= cx < width and 0 <= cy < height):
+        raise BoxError(
+            f"box {values} lies outside the {width}x{height} image (its centre must be inside)"
+        )
+    return values
+
+
+def _as_image(frame: np.ndarray) -> np.ndarray:
+    if not isinstance(frame, np.ndarray) or frame.ndim not in (2, 3) or frame.size == 0:
+        raise InputError("a frame must be a non-empty HxW or HxWx3 numpy array")
+    if frame.ndim == 3 and frame.shape[2] == 4:
+        frame = frame[:, :, :3]
+    if frame.ndim == 3 and frame.shape[2] not in (1, 3):
+        raise InputError(f"a frame must have 1 or 3 channels, not {frame.shape[2]}")
+    if frame.dtype != np.uint8:
+        frame = np.clip(frame, 0, 255).astype(np.uint8)
+    if frame.ndim == 3 and frame.shape[2] == 1:
+        frame = frame[:, :, 0]
+    return frame
+
+
+class AutoTrack:
+    """AutoTrack (CVPR 2020) single-target tracker.
+
+    `init(frame, box)` then `update(frame)` per frame; both return a `TrackResult`. Frames are
+    RGB (or grey) uint8 arrays; boxes are 0-based (x, y, w, h) pixels.
+    """
+
+    def __init__(self, params: TrackerParams | None = None, colour_table: np.ndarray | None = None):
+        self.params = params or TrackerParams()
+        if self.params.colour_feature == "table" and colour_table is None:
+            if not self.params.colour_table_path:
+                raise InputError("colour_feature='table' needs colour_table_path (a .npy or .mat)")
+            colour_table = load_colour_table(self.params.colour_table_path)
+        self.colour_table = colour_table
+        self.admm = dcf.AdmmSettings(
+            iterations=self.params.admm_iterations,
+            lambda_spatial=self.params.admm_lambda,
+            gamma_init=self.params.gamma_init,
+            gamma_step=self.params.gamma_step,
+            gamma_max=self.params.gamma_max,
+        )
+        self.frame_number = 0
+        self.last_result: TrackResult | None = None
+
+    # -- set-up -----------------------------------------------------------------------------
+
+    def _prepare(self, image: np.ndarray) -> np.ndarray:
+        if image.ndim == 3 and self.grey:
+            return np.ascontiguousarray(image[:, :, 0])
+        if image.ndim == 2 and not self.grey:
+            return cv2.cvtColor(image, cv2.COLOR_GRAY2RGB)
+        return image
+
+    def init(self, frame: np.ndarray, box: Sequence[float]) -> TrackResult:
+        """Start tracking the target in `box` (0-based x, y, w, h) of `frame`."""
+        image = _as_image(frame)
+        height, width = image.shape[:2]
+        x, y, w, h = validate_box(box, (width, height))
+        p = self.params
+        self.grey = is_grey(image)
+        image = self._prepare(image)
+        self.image_size_hw = (height, width)
+
+        # The release's 1-based integer centre: floor([y, x] + floor([h, w] / 2)).
+        size_hw = np.array([h, w], dtype=np.float64)
+        self.position = np.floor(np.array([y + 1.0, x + 1.0]) + np.floor(size_hw / 2.0))
+        target_size = np.floor(size_hw)
+        search_area = float(np.prod(target_size * p.search_area_scale))
+        if search_area > p.max_image_sample_size:
+            self.scale = math.sqrt(search_area / p.max_image_sample_size)
+        elif search_area < p.min_image_sample_size:
+            self.scale = math.sqrt(search_area / p.min_image_sample_size)
+        else:
+            self.scale = 1.0
+        self.initial_scale = self.scale
+        self.base_target_size = target_size / self.scale
+        cell = p.cell_size
+        window_side = math.sqrt(float(np.prod(self.base_target_size * p.search_area_scale)))
+        self.window_size = np.full(2, float(dcf.matlab_round(window_side / cell) * cell))
+        self.grid_size = (int(self.window_size[0] // cell), int(self.window_size[1] // cell))
+        region_size = np.floor(self.base_target_size / cell).astype(int)
+        self.region_size = (max(int(region_size[0]), 1), max(int(region_size[1]), 1))
+
+        sigma = (
+            math.sqrt(float(np.prod(np.floor(self.base_target_size / cell))))
+            * p.output_sigma_factor
+        )
+        self.label_f = dcf.to_spectrum(dcf.gaussian_label(self.grid_size, sigma).astype(np.float32))
+        self.cos_window = dcf.cosine_window(self.grid_size)
+        self.base_window = regularization.base_spatial_window(
+            self.grid_size, self.region_size, p.reg_window_max, p.reg_window_min
+        )
+        self.region = regularization.target_region(self.grid_size, self.region_size)
+        self.spatial_window = self.base_window
+        self.scale_filter = ScaleFilter(
+            p, target_size, self.base_target_size, self.window_size, self.image_size_hw
+        )
+
+        self.frame_number = 1
+        search_box = self._search_box()
+        channels = feature_dim(p, colour=not self.grey)
+        self.transform = dcf.SpectrumTransform(channels, self.grid_size)
+        xf = self._features_spectrum(image)
+        self.filter_f = np.zeros_like(xf)
+        self.filter_f, theta = self._train(xf, theta_start=0.0, theta_ref=0.0)
+        self.scale_filter.update(image, self.position, self.scale, best=None)
+        self.confidence = (
+            robust.ResponseConfidence(p.confidence_memory) if p.confidence_gate > 0 else None
+        )
+        self.previous_response: np.ndarray | None = None
+        self.previous_displacement = (0.0, 0.0)
+        result = TrackResult(
+            frame_index=0,
+            box=self._box(),
+            peak_score=float("nan"),
+            response_map=None,
+            local_variation=None,
+            global_variation=float("nan"),
+            theta_ref=0.0,
+            theta=theta,
+            aberrant=False,
+            scale_factor=self._relative_scale(),
+            search_box=search_box,
+        )
+        self.last_result = result
+        return result
+
+    # -- per frame --------------------------------------------------------------------------
+
+    def update(self, frame: np.ndarray) -> TrackResult:
+        """Track the target into `frame`; returns the new box and the filter's signals."""
+        if self.frame_number == 0:
+            raise InputError("call init(frame, box) before update(frame)")
+        image = _as_image(frame)
+        if image.shape[:2] != self.image_size_hw:
+            raise InputError(
+                f"frame size {image.shape[1]}x{image.shape[0]} differs from the first frame's "
+                f"{self.image_size_hw[1]}x{self.image_size_hw[0]}"
+            )
+        image = self._prepare(image)
+        p = self.params
+        self.frame_number += 1
+        search_box = self._search_box()
+
+        # Detection (eq. 16) and the sub-pixel peak.
+        zf = self._features_spectrum(image)
+        response = dcf.detection_response(self.filter_f, zf, self.grid_size)
+        disp_row, disp_col, peak_score = dcf.newton_peak(response, p.newton_iterations)
+        confident = self._is_confident(peak_score, response)
+        if not confident and p.redetect_span:
+            found = self._redetect(image, peak_score)
+            if found is not None:
+                zf, response, (disp_row, disp_col, peak_score), search_box = found
+                confident = True
+        if self.confidence is not None:
+            self.confidence.observe(peak_score, robust.apce(response), p.confidence_gate)
+
+        # Response variations (eq. 2), theta_ref and the aberrance stop (eq. 4), ASR (eq. 3).
+        variation, eta, aberrant, theta_ref = self._regularize(response, (disp_row, disp_col))
+        self.previous_response = response
+        self.previous_displacement = (disp_row, disp_col)
+
+        # Translation in pixels and the scale search at the new position.
+        best_scale = None
+        translation = dcf.matlab_round(np.array([disp_row, disp_col]) * p.cell_size * self.scale)
+        self.position = self.position + translation
+        # A low-confidence frame (occluder, loss) changes neither the filter nor the scale.
+        if confident:
+            best_scale, self.scale = self.scale_filter.detect(image, self.position, self.scale)
+
+        # Train on the detection features moved to the new position (release's reuse).
+        theta = float("nan")
+        if not aberrant and confident:
+            cells = translation / (p.cell_size * self.scale)
+            xf = dcf.shift_spectrum(zf, cells[0], cells[1], self.grid_size)
+            theta_start = p.zeta if p.adaptive_temporal else p.fixed_theta
+            self.filter_f, theta = self._train(xf, theta_start, theta_ref)
+        if confident:
+            self.scale_filter.update(image, self.position, self.scale, best_scale)
+
+        result = TrackResult(
+            frame_index=self.frame_number - 1,
+            box=self._box(),
+            peak_score=peak_score,
+            response_map=np.fft.fftshift(response).astype(np.float32),
+            local_variation=variation,
+            global_variation=eta,
+            theta_ref=float(theta_ref),
+            theta=theta,
+            aberrant=aberrant,
+            scale_factor=self._relative_scale(),
+            search_box=search_box,
+        )
+        self.last_result = result
+        return result
+
+    # -- helpers ----------------------------------------------------------------------------
+
+    @property
+    def asr_reference(self) -> tuple[float, float]:
+        """(gamma of the first h-step, lambda): the scale of the acting ASR window."""
+        return self.params.gamma_init, self.params.admm_lambda
+
+    def _regularize(
+        self, response: np.ndarray, displacement: tuple[float, float]
+    ) -> tuple[np.ndarray | None, float, bool, float]:
+        """Variation maps (eq. 2), eta, the aberrance stop and theta_ref (eq. 4), ASR (eq. 3).
+
+        Returns (local variation or None, eta, aberrant, theta_ref); updates the spatial window.
+        """
+        p = self.params
+        variation = None
+        eta = float("nan")
+        aberrant = False
+        theta_ref = p.zeta if p.adaptive_temporal else p.fixed_theta
+        if self.frame_number > 2 and self.previous_response is not None:
+            peaks = (displacement, self.previous_response, self.previous_displacement)
+            if p.robust_variation:
+                variation = robust.robust_local_variation(response, *peaks, p.variation_floor)
+            else:
+                variation = regularization.local_variation(response, *peaks)
+            eta = regularization.global_variation(variation)
+            if p.adaptive_temporal:
+                aberrant = regularization.is_aberrant(eta, p.phi)
+                if not aberrant:
+                    theta_ref = regularization.temporal_reference(eta, p.zeta, p.nu)
+            if p.adaptive_spatial and p.acting_asr:
+                self.spatial_window = robust.acting_spatial_window(
+                    self.base_window, variation, self.region, p.delta, *self.asr_reference
+                )
+            elif p.adaptive_spatial:
+                self.spatial_window = regularization.adaptive_spatial_window(
+                    self.base_window, variation, self.region, p.delta
+                )
+        return variation, eta, aberrant, theta_ref
+
+    def _is_confident(self, peak_score: float, response: np.ndarray) -> bool:
+        """Whether this detection clears the confidence gate (always True without a gate)."""
+        if self.confidence is None:
+            return True
+        confidence = self.confidence.confidence(peak_score, robust.apce(response))
+        return confidence >= self.params.confidence_gate
+
+    def _redetect(self, image: np.ndarray, local_peak: float):
+        """Wider search (redetect.py); moves the tracker and returns its detection, or None."""
+        p = self.params
+        offset, _ = redetect.wide_search_offset(
+            image,
+            self.position,
+            self.scale,
+            int(self.window_size[0]),
+            p.redetect_span,
+            self.filter_f,
+            self.grid_size,
+            self.cos_window,
+            p,
+            self.colour_table,
+        )
+        if np.max(np.abs(offset)) < p.cell_size * self.scale:
+            return None  # the best placement is the current one
+        saved = self.position
+        height, width = self.image_size_hw
+        candidate = self.position + dcf.matlab_round(offset)
+        self.position = np.clip(candidate, 1.0, [float(height), float(width)])
+        zf = self._features_spectrum(image)
+        response = dcf.detection_response(self.filter_f, zf, self.grid_size)
+        peak = dcf.newton_peak(response, p.newton_iterations)
+        # Move only to a confident place that beats the local peak by as much as the gate
+        # discounts a usual peak: a look-alike no better than the target does not win.
+        dominant = peak[2] * p.confidence_gate > local_peak
+        if dominant and self._is_confident(peak[2], response):
+            return zf, response, peak, self._search_box()
+        self.position = saved
+        return None
+
+    def _features_spectrum(self, image: np.ndarray) -> np.ndarray:
+        region = dcf.matlab_round(self.window_size * self.scale).astype(int)
+        patch = search_patch(
+            image,
+            self.position,
+            (region[0], region[1]),
+            (int(self.window_size[0]), int(self.window_size[1])),
+        )
+        features = extract_features(patch, self.params, self.colour_table)
+        windowed = np.empty((features.shape[2], *self.grid_size), dtype=np.float32)
+        np.multiply(features.transpose(2, 0, 1), self.cos_window, out=windowed)
+        return self.transform.forward(windowed)
+
+    def _theta_update(
+        self, theta_ref: float, filter_prev: np.ndarray
+    ) -> regularization.ThetaRule | None:
+        """Eq. 13 inside ADMM (regularization.theta_update), in the parameters' variant; None
+        keeps theta at its start value (0, zeta, or STRCF's fixed theta). Like every variant it
+        is not re-estimated after the last iteration (train_filter stops there)."""
+        p = self.params
+        if not p.adaptive_temporal or self.frame_number <= 2:
+            return None
+        return regularization.theta_update(p.theta_update, theta_ref, filter_prev, self.grid_size)
+
+    def _train(
+        self, xf: np.ndarray, theta_start: float, theta_ref: float
+    ) -> tuple[np.ndarray, float]:
+        """Filter for this frame by ADMM (eqs. 8-15), warm-started from the previous one."""
+        update = self._theta_update(theta_ref, self.filter_f)
+        return dcf.train_filter(
+            xf,
+            self.label_f,
+            self.filter_f,
+            self.spatial_window,
+            theta_start,
+            self.admm,
+            self.transform,
+            update,
+        )
+
+    def _target_size(self) -> np.ndarray:
+        return dcf.matlab_round(self.base_target_size * self.scale)
+
+    def _box(self) -> tuple[float, float, float, float]:
+        height, width = self._target_size()
+        row, col = self.position
+        return (
+            float(col - width / 2.0 - 1.0),
+            float(row - height / 2.0 - 1.0),
+            float(width),
+            float(height),
+        )
+
+    def _search_box(self) -> tuple[float, float, float, float]:
+        region = dcf.matlab_round(self.window_size * self.scale)
+        row, col = self.position
+        top = math.floor(row) - int(region[0]) // 2
+        left = math.floor(col) - int(region[1]) // 2
+        return (float(left), float(top), float(region[1]), float(region[0]))
+
+    def _relative_scale(self) -> float:
+        return float(self.scale / self.initial_scale)
+
+
+class CvAutoTrack:
+    """AutoTrack with OpenCV's tracker call shape: BGR frames, `ok, box = update(frame)`."""
+
+    def __init__(self, params: TrackerParams | None = None, colour_table: np.ndarray | None = None):
+        self.tracker = AutoTrack(params, colour_table)
+
+    @staticmethod
+    def _to_rgb(frame: np.ndarray) -> np.ndarray:
+        if frame.ndim == 3 and frame.shape[2] == 3:
+            return cv2.cvtColor(frame, cv2.COLOR_BGR2RGB)
+        return frame
+
+    def init(self, frame: np.ndarray, box: Sequence[float]) -> None:
+        """Start tracking `box` (x, y, w, h) in a BGR frame."""
+        self.tracker.init(self._to_rgb(frame), box)
+
+    def update(self, frame: np.ndarray) -> tuple[bool, tuple[float, float, float, float]]:
+        """(ok, box): ok is False on frames judged aberrant (the box is still the estimate)."""
+        result = self.tracker.update(self._to_rgb(frame))
+        return (not result.aberrant, result.box)
