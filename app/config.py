@@ -31,7 +31,7 @@ class AppConfig:
     demo_dir: Path = DEMO_DIR
     """The embedded demo."""
     tracker_preset: str = "autotrack"
-    """Tracker preset of new runs (autotrack, strcf, strcf+asr, strcf+atr)."""
+    """Tracker preset of new runs (autotrack, strcf, strcf+asr, strcf+atr, autotrack+)."""
     tracker_threads: int = 2
     """Threads each multi-target tracker may use."""
     max_targets: int = 4

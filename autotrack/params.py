@@ -93,6 +93,34 @@ class TrackerParams:
     scale_model_max_area: float = 32.0 * 16.0
     """Largest area (pixels^2) of a resampled scale sample."""
 
+    # Beyond the release (the `autotrack+` preset, autotrack/tracker/robust.py and redetect.py); every
+    # switch is off in the faithful presets, which then run the release's code path unchanged.
+    robust_variation: bool = False
+    """Local variation with its denominator floored at `variation_floor` x the previous peak
+    (robust.robust_local_variation) instead of the bare previous response."""
+    variation_floor: float = 0.1
+    """Floor of the local variation's denominator, as a fraction of the previous peak. The
+    label is a Gaussian a few cells wide, so a learnt response below ~10 % of its peak is
+    sidelobe noise, not target evidence."""
+    acting_asr: bool = False
+    """ASR scaled so delta * log(Pi + 1) is the relative attenuation of the last h-step
+    (robust.acting_spatial_window); the release's u is ~1e-6 of the h-step denominator."""
+    confidence_gate: float = 0.0
+    """Learn the filter and the scale model only when the detection's peak is at least this
+    fraction of its running average and its APCE at least the square of it
+    (robust.ResponseConfidence); 0 = always (release). 0.7: LMCF's published peak threshold
+    (its APCE threshold, 0.45, is ~0.7^2)."""
+    confidence_memory: float = 0.1
+    """Per-frame rate of the running average of the peak: about ten frames (1 s at the UAV
+    benchmarks' 10 fps) of memory, so slow appearance change is followed, an occlusion is not."""
+    redetect_span: float = 0.0
+    """When the confidence is below the gate, search a square `redetect_span` times the search
+    region's side (redetect.wide_search_offset) and move there if it is confident and beats the
+    local peak; 0 = never. 3: one full search region beyond the current one in every direction."""
+    scale_model_min_side: float = 0.0
+    """Smallest side (pixels) of a resampled scale sample; 0 = the release's (area <= 512 only).
+    16 px = four fHOG cells, so a thin target keeps interior cells across its short side."""
+
     def __post_init__(self) -> None:
         from autotrack.errors import InputError
 
@@ -107,6 +135,12 @@ class TrackerParams:
             problems.append("admm_iterations must be >= 1 and newton_iterations >= 0")
         if self.num_scales < 1 or not self.scale_step > 1:
             problems.append("num_scales must be >= 1 and scale_step > 1")
+        if not 0 < self.variation_floor <= 1 or not 0 < self.confidence_memory <= 1:
+            problems.append("variation_floor and confidence_memory must be in (0, 1]")
+        if self.confidence_gate < 0 or self.redetect_span < 0 or self.scale_model_min_side < 0:
+            problems.append("confidence_gate, redetect_span, scale_model_min_side must be >= 0")
+        if self.redetect_span and not (self.redetect_span > 1 and self.confidence_gate > 0):
+            problems.append("redetect_span needs a confidence_gate and must be > 1")
         if self.colour_feature not in ("lab11", "table", "none"):
             problems.append(
                 f"colour_feature must be 'lab11', 'table' or 'none', not {self.colour_feature!r}"
@@ -123,6 +157,8 @@ class TrackerParams:
     @property
     def name(self) -> str:
         """Short label of the regularisation variant (for tables)."""
+        if self.beyond_release:
+            return "autotrack+"
         if self.adaptive_spatial and self.adaptive_temporal:
             return "autotrack"
         if self.adaptive_spatial:
@@ -130,6 +166,17 @@ class TrackerParams:
         if self.adaptive_temporal:
             return "strcf+atr"
         return "strcf"
+
+    @property
+    def beyond_release(self) -> bool:
+        """True when any change beyond the authors' release is switched on."""
+        return bool(
+            self.robust_variation
+            or self.acting_asr
+            or self.confidence_gate
+            or self.redetect_span
+            or self.scale_model_min_side
+        )
 
     def with_colour_table(self, path: str | Path | None) -> TrackerParams:
         """The same parameters with the published Color Names table loaded from `path`."""
@@ -143,8 +190,16 @@ PRESETS: dict[str, TrackerParams] = {
     "strcf": TrackerParams(adaptive_spatial=False, adaptive_temporal=False),
     "strcf+asr": TrackerParams(adaptive_spatial=True, adaptive_temporal=False),
     "strcf+atr": TrackerParams(adaptive_spatial=False, adaptive_temporal=True),
+    "autotrack+": TrackerParams(
+        robust_variation=True,
+        acting_asr=True,
+        confidence_gate=0.7,
+        redetect_span=3.0,
+        scale_model_min_side=16.0,
+    ),
 }
-"""The paper's ablation (Table 2): STRCF baseline, +ASR, +ATR, and the full AutoTrack."""
+"""The paper's ablation (Table 2): STRCF baseline, +ASR, +ATR, the full AutoTrack (the authors'
+release), and `autotrack+`: AutoTrack with the changes beyond the release (docs/tracker.md)."""
 
 
 def preset(name: str, colour_table: str | Path | None = None) -> TrackerParams:

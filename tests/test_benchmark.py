@@ -78,7 +78,16 @@ def synthetic_root(tmp_path: Path) -> Path:
 
 
 def test_make_tracker_knows_every_name_and_rejects_others():
-    assert TRACKER_NAMES == ("autotrack", "strcf", "strcf+asr", "strcf+atr", "csrt", "kcf", "mosse")
+    assert TRACKER_NAMES == (
+        "autotrack",
+        "strcf",
+        "strcf+asr",
+        "strcf+atr",
+        "autotrack+",
+        "csrt",
+        "kcf",
+        "mosse",
+    )
     with pytest.raises(InputError, match="unknown tracker 'staple'"):
         make_tracker("staple")
 

@@ -45,6 +45,10 @@ class ScaleFilter:
         model_factor = 1.0
         if model_factor**2 * target_area > params.scale_model_max_area:
             model_factor = math.sqrt(params.scale_model_max_area / target_area)
+        shortest = float(np.min(initial_target_size_hw))
+        if params.scale_model_min_side and model_factor * shortest < params.scale_model_min_side:
+            # autotrack+: keep >= 4 fHOG cells across a thin target (params.scale_model_min_side)
+            model_factor = params.scale_model_min_side / shortest
         model_size = np.floor(np.asarray(initial_target_size_hw, dtype=np.float64) * model_factor)
         self.model_size_hw = (max(int(model_size[0]), 4), max(int(model_size[1]), 4))
         step = params.scale_step

@@ -17,7 +17,7 @@ import numpy as np
 from autotrack.errors import BoxError, InputError
 from autotrack.params import TrackerParams
 from autotrack.result import TrackResult
-from autotrack.tracker import dcf, regularization
+from autotrack.tracker import dcf, redetect, regularization, robust
 from autotrack.tracker.features import extract_features, feature_dim, is_grey, load_colour_table
 from autotrack.tracker.sampling import search_patch
 from autotrack.tracker.scale import ScaleFilter
@@ -143,6 +143,9 @@ class AutoTrack:
         self.filter_f = np.zeros_like(xf)
         self.filter_f, theta = self._train(xf, theta_start=0.0, theta_ref=0.0)
         self.scale_filter.update(image, self.position, self.scale, best=None)
+        self.confidence = (
+            robust.ResponseConfidence(p.confidence_memory) if p.confidence_gate > 0 else None
+        )
         self.previous_response: np.ndarray | None = None
         self.previous_displacement = (0.0, 0.0)
         result = TrackResult(
@@ -183,41 +186,37 @@ class AutoTrack:
         zf = self._features_spectrum(image)
         response = dcf.detection_response(self.filter_f, zf, self.grid_size)
         disp_row, disp_col, peak_score = dcf.newton_peak(response, p.newton_iterations)
+        confident = self._is_confident(peak_score, response)
+        if not confident and p.redetect_span:
+            found = self._redetect(image, peak_score)
+            if found is not None:
+                zf, response, (disp_row, disp_col, peak_score), search_box = found
+                confident = True
+        if self.confidence is not None:
+            self.confidence.observe(peak_score, robust.apce(response), p.confidence_gate)
 
         # Response variations (eq. 2), theta_ref and the aberrance stop (eq. 4), ASR (eq. 3).
-        variation = None
-        eta = float("nan")
-        aberrant = False
-        theta_ref = p.zeta if p.adaptive_temporal else p.fixed_theta
-        if self.frame_number > 2 and self.previous_response is not None:
-            variation = regularization.local_variation(
-                response, (disp_row, disp_col), self.previous_response, self.previous_displacement
-            )
-            eta = regularization.global_variation(variation)
-            if p.adaptive_temporal:
-                aberrant = regularization.is_aberrant(eta, p.phi)
-                if not aberrant:
-                    theta_ref = regularization.temporal_reference(eta, p.zeta, p.nu)
-            if p.adaptive_spatial:
-                self.spatial_window = regularization.adaptive_spatial_window(
-                    self.base_window, variation, self.region, p.delta
-                )
+        variation, eta, aberrant, theta_ref = self._regularize(response, (disp_row, disp_col))
         self.previous_response = response
         self.previous_displacement = (disp_row, disp_col)
 
         # Translation in pixels and the scale search at the new position.
+        best_scale = None
         translation = dcf.matlab_round(np.array([disp_row, disp_col]) * p.cell_size * self.scale)
         self.position = self.position + translation
-        best_scale, self.scale = self.scale_filter.detect(image, self.position, self.scale)
+        # A low-confidence frame (occluder, loss) changes neither the filter nor the scale.
+        if confident:
+            best_scale, self.scale = self.scale_filter.detect(image, self.position, self.scale)
 
         # Train on the detection features moved to the new position (release's reuse).
         theta = float("nan")
-        if not aberrant:
+        if not aberrant and confident:
             cells = translation / (p.cell_size * self.scale)
             xf = dcf.shift_spectrum(zf, cells[0], cells[1], self.grid_size)
             theta_start = p.zeta if p.adaptive_temporal else p.fixed_theta
             self.filter_f, theta = self._train(xf, theta_start, theta_ref)
-        self.scale_filter.update(image, self.position, self.scale, best_scale)
+        if confident:
+            self.scale_filter.update(image, self.position, self.scale, best_scale)
 
         result = TrackResult(
             frame_index=self.frame_number - 1,
@@ -237,6 +236,83 @@ class AutoTrack:
         return result
 
     # -- helpers ----------------------------------------------------------------------------
+
+    @property
+    def asr_reference(self) -> tuple[float, float]:
+        """(gamma of the first h-step, lambda): the scale of the acting ASR window."""
+        return self.params.gamma_init, self.params.admm_lambda
+
+    def _regularize(
+        self, response: np.ndarray, displacement: tuple[float, float]
+    ) -> tuple[np.ndarray | None, float, bool, float]:
+        """Variation maps (eq. 2), eta, the aberrance stop and theta_ref (eq. 4), ASR (eq. 3).
+
+        Returns (local variation or None, eta, aberrant, theta_ref); updates the spatial window.
+        """
+        p = self.params
+        variation = None
+        eta = float("nan")
+        aberrant = False
+        theta_ref = p.zeta if p.adaptive_temporal else p.fixed_theta
+        if self.frame_number > 2 and self.previous_response is not None:
+            peaks = (displacement, self.previous_response, self.previous_displacement)
+            if p.robust_variation:
+                variation = robust.robust_local_variation(response, *peaks, p.variation_floor)
+            else:
+                variation = regularization.local_variation(response, *peaks)
+            eta = regularization.global_variation(variation)
+            if p.adaptive_temporal:
+                aberrant = regularization.is_aberrant(eta, p.phi)
+                if not aberrant:
+                    theta_ref = regularization.temporal_reference(eta, p.zeta, p.nu)
+            if p.adaptive_spatial and p.acting_asr:
+                self.spatial_window = robust.acting_spatial_window(
+                    self.base_window, variation, self.region, p.delta, *self.asr_reference
+                )
+            elif p.adaptive_spatial:
+                self.spatial_window = regularization.adaptive_spatial_window(
+                    self.base_window, variation, self.region, p.delta
+                )
+        return variation, eta, aberrant, theta_ref
+
+    def _is_confident(self, peak_score: float, response: np.ndarray) -> bool:
+        """Whether this detection clears the confidence gate (always True without a gate)."""
+        if self.confidence is None:
+            return True
+        confidence = self.confidence.confidence(peak_score, robust.apce(response))
+        return confidence >= self.params.confidence_gate
+
+    def _redetect(self, image: np.ndarray, local_peak: float):
+        """Wider search (redetect.py); moves the tracker and returns its detection, or None."""
+        p = self.params
+        offset, _ = redetect.wide_search_offset(
+            image,
+            self.position,
+            self.scale,
+            int(self.window_size[0]),
+            p.redetect_span,
+            self.filter_f,
+            self.grid_size,
+            self.cos_window,
+            p,
+            self.colour_table,
+        )
+        if np.max(np.abs(offset)) < p.cell_size * self.scale:
+            return None  # the best placement is the current one
+        saved = self.position
+        height, width = self.image_size_hw
+        candidate = self.position + dcf.matlab_round(offset)
+        self.position = np.clip(candidate, 1.0, [float(height), float(width)])
+        zf = self._features_spectrum(image)
+        response = dcf.detection_response(self.filter_f, zf, self.grid_size)
+        peak = dcf.newton_peak(response, p.newton_iterations)
+        # Move only to a confident place that beats the local peak by as much as the gate
+        # discounts a usual peak: a look-alike no better than the target does not win.
+        dominant = peak[2] * p.confidence_gate > local_peak
+        if dominant and self._is_confident(peak[2], response):
+            return zf, response, peak, self._search_box()
+        self.position = saved
+        return None
 
     def _features_spectrum(self, image: np.ndarray) -> np.ndarray:
         region = dcf.matlab_round(self.window_size * self.scale).astype(int)
