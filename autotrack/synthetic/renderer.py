@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import json
 import math
-from collections.abc import Callable
+from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 
 import cv2
@@ -315,6 +315,32 @@ def render_sequence(
     return out
 
 
+def write_sequence_truth(
+    out: Path,
+    scene: Scene,
+    boxes: Mapping[str, Sequence[Sequence[float]]],
+    timestamps: np.ndarray,
+    rotations: np.ndarray,
+    positions: np.ndarray,
+) -> None:
+    """scene.json, boxes.json (the first frame's boxes), poses_gt.tum and
+    groundtruth/<landmark>.txt (one x,y,w,h row per frame) of a rendered sequence."""
+    save_scene(scene, out / "scene.json")
+    first_boxes = [
+        f"  {json.dumps(k)}: [{', '.join(f'{v:.2f}' for v in b[0])}]" for k, b in boxes.items()
+    ]
+    (out / "boxes.json").write_text("{\n" + ",\n".join(first_boxes) + "\n}\n", encoding="utf-8")
+    write_tum(
+        out / "poses_gt.tum",
+        timestamps,
+        positions,
+        Rotation.from_matrix(rotations).as_quat(canonical=True),
+    )
+    for landmark_id, rows in boxes.items():
+        lines = [",".join(f"{v:.2f}" for v in row) for row in rows]
+        (out / "groundtruth" / f"{landmark_id}.txt").write_text("\n".join(lines) + "\n")
+
+
 def _write_ground_truth(
     out: Path,
     spec: SequenceSpec,
@@ -333,20 +359,7 @@ def _write_ground_truth(
         *(out / "groundtruth").glob("*.txt"),
     ]:
         stale.unlink()
-    save_scene(scene, out / "scene.json")
-    first_boxes = [
-        f"  {json.dumps(k)}: [{', '.join(f'{v:.2f}' for v in b[0])}]" for k, b in boxes.items()
-    ]
-    (out / "boxes.json").write_text("{\n" + ",\n".join(first_boxes) + "\n}\n", encoding="utf-8")
-    write_tum(
-        out / "poses_gt.tum",
-        timestamps,
-        positions,
-        Rotation.from_matrix(rotations).as_quat(canonical=True),
-    )
-    for landmark_id, rows in boxes.items():
-        lines = [",".join(f"{v:.2f}" for v in row) for row in rows]
-        (out / "groundtruth" / f"{landmark_id}.txt").write_text("\n".join(lines) + "\n")
+    write_sequence_truth(out, scene, boxes, timestamps, rotations, positions)
     metadata = {
         "name": spec.name,
         "trajectory": spec.trajectory,

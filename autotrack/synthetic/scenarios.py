@@ -26,13 +26,10 @@ from pathlib import Path
 
 import cv2
 import numpy as np
-from scipy.spatial.transform import Rotation
 
 from autotrack.errors import InputError
-from autotrack.io.tum import write_tum
 from autotrack.localization.camera import project_points
-from autotrack.localization.scene import save_scene
-from autotrack.synthetic.renderer import Renderer, _blur_vector
+from autotrack.synthetic.renderer import Renderer, _blur_vector, write_sequence_truth
 from autotrack.synthetic.trajectories import (
     RenderSettings,
     SequenceSpec,
@@ -309,21 +306,8 @@ def render_scenario(
     (out / "groundtruth").mkdir(exist_ok=True)
     for stale in [*(out / "img").glob("*.jpg"), *(out / "groundtruth").glob("*.txt")]:
         stale.unlink()
-    save_scene(scene, out / "scene.json")
     boxes = {k: [landmark_box(camera, k, r, p) for r, p in poses] for k in LANDMARK_LAYOUT}
-    first = [
-        f"  {json.dumps(k)}: [{', '.join(f'{v:.2f}' for v in b[0])}]" for k, b in boxes.items()
-    ]
-    (out / "boxes.json").write_text("{\n" + ",\n".join(first) + "\n}\n", encoding="utf-8")
-    write_tum(
-        out / "poses_gt.tum",
-        timestamps,
-        positions,
-        Rotation.from_matrix(rotations).as_quat(canonical=True),
-    )
-    for landmark_id, rows in boxes.items():
-        lines = [",".join(f"{v:.2f}" for v in row) for row in rows]
-        (out / "groundtruth" / f"{landmark_id}.txt").write_text("\n".join(lines) + "\n")
+    write_sequence_truth(out, scene, boxes, timestamps, rotations, positions)
     _write_case_files(out, spec, fractions)
 
     renderer = Renderer(camera, sequence.seed, settings.noise_sigma)
