@@ -50,6 +50,14 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument(
         "--plots", action="store_true", help="write precision/success plots to DIR/plots/"
     )
+    parser.add_argument("--force", action="store_true", help="replace an existing --json file")
+    add_run_arguments(parser)
+    parser.set_defaults(func=run)
+
+
+def add_run_arguments(parser: argparse.ArgumentParser) -> None:
+    """--color-names, --scheduler and --no-progress: how a batch of tracking runs is run
+    (shared by `bench` and `sweep`)."""
     parser.add_argument(
         "--color-names",
         "--colour-table",
@@ -58,7 +66,6 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
         metavar="PATH",
         help="published Color Names table (32768 x 10, .npy or .mat) for the AutoTrack variants",
     )
-    parser.add_argument("--force", action="store_true", help="replace an existing --json file")
     parser.add_argument(
         "--scheduler",
         default=None,
@@ -66,7 +73,6 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
         help="run on this Dask scheduler's workers (they need the data at the same path)",
     )
     parser.add_argument("--no-progress", action="store_true", help="hide the progress bar")
-    parser.set_defaults(func=run)
 
 
 def run(args: argparse.Namespace) -> int:

@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+from autotrack.cli.bench import add_run_arguments
 from autotrack.params import PRESETS
 
 
@@ -43,21 +44,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument(
         "--jobs", type=int, default=1, metavar="N", help="local worker processes (default 1)"
     )
-    parser.add_argument(
-        "--scheduler",
-        default=None,
-        metavar="tcp://HOST:PORT",
-        help="run on this Dask scheduler's workers (they need the data at the same path)",
-    )
-    parser.add_argument(
-        "--color-names",
-        "--colour-table",
-        dest="colour_table",
-        type=Path,
-        metavar="PATH",
-        help="published Color Names table (32768 x 10, .npy or .mat)",
-    )
-    parser.add_argument("--no-progress", action="store_true", help="hide the progress bar")
+    add_run_arguments(parser)
     parser.set_defaults(func=run)
 
 
