@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import itertools
 import json
 
 import numpy as np
@@ -12,6 +13,8 @@ from autotrack.localization.camera import CameraIntrinsics
 from autotrack.localization.scene import (
     Landmark,
     Scene,
+    _off_line_distance,
+    collinear_triples,
     load_scene,
     save_scene,
     scene_from_dict,
@@ -163,3 +166,43 @@ def test_unknown_landmark_lookup_lists_known_ids():
     with pytest.raises(SceneError, match="unknown landmark 'E'.*A, B, C, D"):
         scene.landmark("E")
     np.testing.assert_array_equal(scene.object_points(["D", "A"])[1], LANDMARKS[0]["position"])
+
+
+def _collinear_triples_by_svd(points: np.ndarray, spread_m: float) -> list[tuple[int, ...]]:
+    """The former check: one SVD per triple (cubic), kept here as the reference."""
+    return [
+        triple
+        for triple in itertools.combinations(range(len(points)), 3)
+        if _off_line_distance(points[list(triple)]) < spread_m
+    ]
+
+
+def _random_layout(rng: np.random.Generator, count: int) -> np.ndarray:
+    """Landmarks in a room-sized box, with some planted on lines through others (jittered
+    by up to a few centimetres, so some fall each side of the threshold)."""
+    points = rng.uniform([-3.0, 2.0, 0.0], [3.0, 9.0, 2.5], size=(count, 3))
+    for index in range(3, count, 4):
+        a, b = points[rng.integers(0, index, size=2)]
+        points[index] = a + rng.uniform(-0.5, 1.5) * (b - a) + rng.normal(0.0, 0.03, size=3)
+    return points
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_collinear_triples_match_the_per_triple_svd(seed):
+    rng = np.random.default_rng(seed)
+    points = _random_layout(rng, int(rng.integers(8, 40)))
+    size = float(np.linalg.norm(points - points.mean(axis=0), axis=1).max())
+    for spread in (0.01, 0.03 * size, 0.1 * size):
+        expected = _collinear_triples_by_svd(points, spread)
+        assert collinear_triples(points, spread) == expected
+    assert _collinear_triples_by_svd(points, 0.03 * size)  # the planted lines give some
+
+
+def test_scene_with_400_landmarks_is_checked():
+    rng = np.random.default_rng(400)
+    points = _random_layout(rng, 400)
+    landmarks = [{"id": f"L{i}", "position": p.tolist()} for i, p in enumerate(points)]
+    scene = scene_from_dict(scene_dict(landmarks=landmarks))
+    warnings = scene_warnings(scene)
+    assert len(scene.landmark_ids) == 400
+    assert any("collinear" in w for w in warnings)

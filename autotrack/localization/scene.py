@@ -17,6 +17,7 @@ from __future__ import annotations
 import itertools
 import json
 import math
+from collections import Counter
 from collections.abc import Iterable
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -287,15 +288,17 @@ def check_scene(scene: Scene, *, tolerance_m: float = 0.01) -> None:
         raise SceneError(
             f"the scene has {len(ids)} landmark(s); localisation needs at least {MIN_LANDMARKS}"
         )
-    duplicates = sorted({i for i in ids if ids.count(i) > 1})
+    duplicates = sorted(i for i, count in Counter(ids).items() if count > 1)
     if duplicates:
         raise SceneError(f"duplicate landmark id(s): {', '.join(duplicates)}")
     points = scene.object_points()
-    for a, b in itertools.combinations(range(len(ids)), 2):
-        if np.linalg.norm(points[a] - points[b]) < tolerance_m:
-            raise SceneError(
-                f"landmarks {ids[a]} and {ids[b]} are less than {tolerance_m * 100:.0f} cm apart"
-            )
+    distances = np.linalg.norm(points[:, None, :] - points[None, :, :], axis=-1)
+    too_close = np.argwhere(np.triu(distances < tolerance_m, k=1))
+    if too_close.size:
+        a, b = too_close[0]  # the first pair in (a, b) order, as a pairwise loop would find
+        raise SceneError(
+            f"landmarks {ids[a]} and {ids[b]} are less than {tolerance_m * 100:.0f} cm apart"
+        )
     if _off_line_distance(points) < tolerance_m:
         raise SceneError("all landmarks lie on one line: the camera pose cannot be recovered")
 
@@ -322,13 +325,9 @@ def scene_warnings(
     points = scene.object_points()
     warnings: list[str] = []
     size = float(np.linalg.norm(points - points.mean(axis=0), axis=1).max())
-    for triple in itertools.combinations(range(len(ids)), 3):
-        spread = _off_line_distance(points[list(triple)])
-        if spread < max(tolerance_m, flatness_ratio * size):
-            names = ", ".join(ids[i] for i in triple)
-            warnings.append(
-                f"landmarks {names} are (nearly) collinear: avoid relying on them alone"
-            )
+    for triple in collinear_triples(points, max(tolerance_m, flatness_ratio * size)):
+        names = ", ".join(ids[i] for i in triple)
+        warnings.append(f"landmarks {names} are (nearly) collinear: avoid relying on them alone")
     if _off_plane_distance(points) < max(tolerance_m, flatness_ratio * size):
         warnings.append(
             "all landmarks are (nearly) coplanar: poses can flip between two solutions at "
@@ -349,6 +348,45 @@ def scene_warnings(
                 )
                 break
     return warnings
+
+
+def collinear_triples(points: np.ndarray, spread_m: float) -> list[tuple[int, int, int]]:
+    """Index triples (i < j < k, in lexicographic order) whose off-line spread
+    (`_off_line_distance`) is below `spread_m`.
+
+    One pass per first index i: the spread of every (j, k) follows in closed form from the
+    Gram matrix of the offsets p_j - p_i (one matrix product), so the work per pass is an
+    (n, n) array instead of one SVD per triple. For three points the centred scatter has
+    trace T = (|ij|^2 + |ik|^2 + |jk|^2) / 3 and product of its two eigenvalues
+    P = |(p_j - p_i) x (p_k - p_i)|^2 / 3; the spread is the root of the smaller eigenvalue,
+    2P / (T + sqrt(T^2 - 4P)). Candidates within a relative 1e-6 of the threshold are
+    confirmed with the SVD, so the verdicts are the SVD's.
+    """
+    points = np.asarray(points, dtype=np.float64)
+    count = len(points)
+    margin = spread_m * (1.0 + 1e-6) + 1e-12
+    found: list[tuple[int, int, int]] = []
+    for i in range(count - 2):
+        offsets = points[i + 1 :] - points[i]
+        gram = offsets @ offsets.T
+        squared = np.diag(gram)
+        cross_squared = np.maximum(np.outer(squared, squared) - gram * gram, 0.0)
+        trace = 2.0 * (squared[:, None] + squared[None, :] - gram) / 3.0
+        product = cross_squared / 3.0
+        root = np.sqrt(np.maximum(trace * trace - 4.0 * product, 0.0))
+        denominator = trace + root
+        smaller = np.divide(
+            2.0 * product, denominator, out=np.zeros_like(product), where=denominator > 0
+        )
+        js, ks = np.nonzero(np.triu(np.sqrt(smaller) < margin, k=1))
+        if js.size == 0:
+            continue
+        triples = np.stack([np.full_like(js, i), js + i + 1, ks + i + 1], axis=1)
+        corners = points[triples]
+        centred = corners - corners.mean(axis=1, keepdims=True)
+        spreads = np.linalg.svd(centred, compute_uv=False)[:, 1]
+        found.extend(tuple(int(v) for v in t) for t in triples[spreads < spread_m])
+    return found
 
 
 def _off_line_distance(points: np.ndarray) -> float:
