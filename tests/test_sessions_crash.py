@@ -169,3 +169,66 @@ def test_kill_minus_nine_keeps_everything_flushed(
 
     assert main(["session", "info", str(session_path)]) == 0
     assert "cut short" in capsys.readouterr().out
+
+
+def _moving_patch_frames(count: int) -> list[np.ndarray]:
+    rng = np.random.default_rng(5)
+    background = rng.integers(0, 255, (160, 200, 3), dtype=np.uint8)
+    patch = rng.integers(0, 255, (30, 30, 3), dtype=np.uint8)
+    frames = []
+    for k in range(count):
+        frame = background.copy()
+        frame[50 + k : 80 + k, 40 + 2 * k : 70 + 2 * k] = patch
+        frames.append(frame)
+    return frames
+
+
+class _Pose:
+    """The attributes of a PoseEstimate the recorder reads."""
+
+    def __init__(self, frame_index: int) -> None:
+        self.frame_index, self.valid, self.reason = frame_index, True, ""
+        self.position = np.array([0.01 * frame_index, 1.0, 5.0])
+        self.rotation = np.eye(3)
+        self.reprojection_errors = {"L1": 0.5}
+        self.used_landmarks = ("L1",)
+
+    def quaternion_xyzw(self) -> np.ndarray:
+        return np.array([0.0, 0.0, 0.0, 1.0])
+
+
+@pytest.mark.parametrize("cut_after", ["first_target", "all_targets"])
+def test_info_counts_only_complete_frames_of_a_cut_recording(
+    tmp_path: Path, capsys: pytest.CaptureFixture, cut_after: str
+) -> None:
+    """The process is "killed" (the file copied as it is on disk) after part of the last
+    frame's records reached the file: that frame is not counted, the earlier ones are."""
+    from autotrack.params import TrackerParams
+    from autotrack.sessions import SessionRecorder
+    from autotrack.tracker.tracker import AutoTrack
+
+    frames = _moving_patch_frames(6)
+    params = TrackerParams()
+    trackers = {"T1": AutoTrack(params), "T2": AutoTrack(params)}
+    starts = {"T1": (40.0, 50.0, 30.0, 30.0), "T2": (120.0, 20.0, 40.0, 30.0)}
+    path, cut = tmp_path / "live.mcap", tmp_path / "cut.mcap"
+    with SessionRecorder(path, source="generated", tracker_params=params, fps=30.0) as recorder:
+        for k, frame in enumerate(frames):
+            for target_id, tracker in trackers.items():
+                result = tracker.init(frame, starts[target_id]) if k == 0 else tracker.update(frame)
+                recorder.log_target(target_id, result)
+                if k == len(frames) - 1 and (cut_after == "first_target" or target_id == "T2"):
+                    break
+            if k == len(frames) - 1:
+                recorder.flush()
+                cut.write_bytes(path.read_bytes())  # what a kill -9 here leaves
+                break
+            recorder.log_pose(_Pose(k))
+    session = open_session(cut)
+    assert session.truncated and session.partial_frame == 5
+    assert session.frame_count == 5
+    assert main(["session", "info", str(cut)]) == 0
+    out = capsys.readouterr().out
+    assert "5 tracked (frames 0-4)" in out and "frame 5 was only partly written" in out
+    # The complete file (closed normally) counts every frame.
+    assert open_session(path).frame_count == 6 and open_session(path).partial_frame is None

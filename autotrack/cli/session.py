@@ -100,7 +100,8 @@ def session_summary(session: Session) -> dict[str, Any]:
         "scene_path": session.metadata.get("scene_path") or None,
         "fps": session.fps,
         "frames": session.frame_count,
-        "last_frame": int(session.frame_indices[-1]) if len(session.frame_indices) else None,
+        "last_frame": _last_complete_frame(session),
+        "partial_frame": session.partial_frame,
         "targets": targets,
         "deleted_targets": sorted(session.deleted_targets),
         "poses": {"frames": int(poses.frame_indices.size), "valid": int(poses.valid.sum())},
@@ -113,6 +114,13 @@ def session_summary(session: Session) -> dict[str, Any]:
         "bytes_read": session.bytes_read,
         "file_size": session.file_size,
     }
+
+
+def _last_complete_frame(session: Session) -> int | None:
+    if not len(session.frame_indices):
+        return None
+    last = int(session.frame_indices[-1])
+    return last - 1 if session.partial_frame == last else last
 
 
 def _format_summary(summary: dict[str, Any]) -> str:
@@ -156,6 +164,11 @@ def _format_summary(summary: dict[str, Any]) -> str:
             f"complete  NO: cut short (crash or interrupted copy); read {summary['messages']} "
             f"messages from the first {summary['bytes_read']} of {summary['file_size']} bytes"
         )
+        if summary["partial_frame"] is not None:
+            lines.append(
+                f"          frame {summary['partial_frame']} was only partly written before the "
+                "cut: not counted"
+            )
     else:
         lines.append(f"complete  yes ({summary['messages']} messages)")
     return "\n".join(lines)

@@ -257,7 +257,27 @@ class _SessionBuilder:
             bytes_read=bytes_read,
             file_size=file_size,
             scene_attachment=self.scene_attachment,
+            partial_frame=self._partial_last_frame() if truncated else None,
         )
+
+    def _partial_last_frame(self) -> int | None:
+        """The last frame of a file cut short, when a crash left only part of its records: a
+        target recorded on the previous frame (and not deleted) or the previous frame's pose is
+        missing there. Each target's and each pose's records are written in one piece, so a
+        frame is cut between them, never inside one."""
+        pose_frames = {int(quality["frame_index"]) for quality in self.pose_quality.values()}
+        frames = set(pose_frames).union(*(set(rows) for rows in self.target_rows.values()))
+        if len(frames) < 2:
+            return None
+        last = max(frames)
+        previous = max(frames - {last})
+        deleted = {event.target_id for event in self.events if event.kind == "box_deleted"}
+        target_missing = any(
+            previous in rows and last not in rows and target_id not in deleted
+            for target_id, rows in self.target_rows.items()
+        )
+        pose_missing = previous in pose_frames and last not in pose_frames
+        return last if target_missing or pose_missing else None
 
     def _dequantised_maps(
         self, frame_of_time: dict[str, dict[int, tuple[int, Any, Any]]]

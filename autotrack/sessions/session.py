@@ -108,6 +108,10 @@ class Session:
     """Target id -> (N, 4) search regions (x, y, w, h) of the recorded results; NaN where none."""
     scene_attachment: bytes | None = field(default=None, repr=False)
     """Contents of the scene file recorded with the session, if any."""
+    partial_frame: int | None = None
+    """In a file cut short: its last frame when only part of that frame's records reached the
+    file (a target or the pose recorded on the frame before is missing there); its records are
+    kept, but it is not counted in `frame_count`."""
 
     @property
     def source(self) -> str:
@@ -121,12 +125,15 @@ class Session:
 
     @property
     def frame_count(self) -> int:
-        """Number of frames with at least one target result."""
+        """Number of complete frames with at least one target result (`partial_frame`, a
+        frame only partly written when the recording was cut, is not counted)."""
         if not self.tracks:
             return 0
         has_box = np.zeros(len(self.frame_indices), dtype=bool)
         for boxes in self.tracks.values():
             has_box |= np.isfinite(boxes).all(axis=1)
+        if self.partial_frame is not None and self.partial_frame < has_box.size:
+            has_box[self.partial_frame] = False
         return int(has_box.sum())
 
     @property
