@@ -37,6 +37,12 @@ def workspace(tmp_path_factory) -> Path:
     (root / "synth_out").write_bytes(SENTINEL)
     (root / "nonempty").mkdir()
     (root / "nonempty" / "keep.txt").write_bytes(SENTINEL)
+    boxes = json.loads((DEMO / "boxes.json").read_text())
+    boxes["A\nX"] = boxes.pop("A")
+    (root / "newline_boxes.json").write_text(json.dumps(boxes))
+    scene = json.loads((DEMO / "scene.json").read_text())
+    scene["landmarks"][0]["id"] = "A\u0000"
+    (root / "nul_scene.json").write_text(json.dumps(scene))
     return root
 
 
@@ -67,6 +73,11 @@ CASES = {
     "localize --scene deeply nested": ["localize", "demo", "--scene", "nested.json"],
     "localize --gt not UTF-8": ["localize", "demo", "--gt", "not_utf8.json"],
     "session info not UTF-8": ["session", "info", "not_utf8.json"],
+    # identifiers with control characters, refused before any file is created
+    "localize --init newline in an id": ["localize", "demo", "--init", "newline_boxes.json"]
+    + ["--session", "new.mcap"],
+    "localize --scene NUL in an id": ["localize", "demo", "--scene", "nul_scene.json"]
+    + ["--session", "new.mcap"],
     # the app, before it serves
     "app --sessions under a file": ["app", "--sessions", "existing.txt/sessions", "--port", "0"],
     "app --host unknown name": ["app", "--host", "no-such-host.invalid", "--port", "0"],
@@ -171,3 +182,22 @@ def test_a_full_disk_at_the_end_ends_in_one_line(workspace: Path, monkeypatch, c
     assert main(argv) == 2
     err = capsys.readouterr().err
     assert err == f"autotrack: error: {out}: No space left on device\n"
+
+
+@pytest.mark.parametrize(
+    "option", [["--init", "newline_boxes.json"], ["--scene", "nul_scene.json"]], ids=str
+)
+def test_control_characters_in_ids_are_refused_as_the_file_is_read(
+    workspace: Path, option: list[str]
+) -> None:
+    done = subprocess.run(
+        [sys.executable, "-m", "autotrack.cli", "localize", "demo", "--quiet", *option]
+        + ["--session", "new.mcap"],
+        cwd=workspace,
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
+    assert done.returncode == 2 and "holds a control character" in done.stderr, done.stderr
+    assert done.stderr.count("\n") == 1 and option[1] in done.stderr
+    assert not (workspace / "new.mcap").exists()

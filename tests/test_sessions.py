@@ -795,3 +795,59 @@ def test_cli_info_says_when_a_session_was_cut_short(
     cut.write_bytes(data[: len(data) // 2])
     assert main(["session", "info", str(cut)]) == 0
     assert "complete  NO: cut short" in capsys.readouterr().out
+
+
+def test_a_session_whose_header_cannot_be_written_leaves_no_file(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """A full disk while the header is written: no orphan file holding half a header."""
+    import errno
+
+    def full_disk(self, *args, **kwargs) -> None:
+        raise OSError(errno.ENOSPC, "No space left on device")
+
+    monkeypatch.setattr(Writer, "start", full_disk)
+    with pytest.raises(SessionError, match="No space left"):
+        SessionRecorder(tmp_path / "s.mcap", source="x", tracker_params={})
+    with pytest.raises(SessionError, match="No space left"):
+        SessionRecorder.create(tmp_path, source="seq", tracker_params={})
+    assert list(tmp_path.iterdir()) == []
+
+
+@pytest.mark.parametrize("bad_id", ["A\nB", "A\rB", "NUL\x00", "tab\there", "A\u2028B"])
+def test_control_characters_in_landmark_ids_are_refused_where_they_enter(
+    tmp_path: Path, bad_id: str
+) -> None:
+    from autotrack.errors import InputError, SceneError
+    from autotrack.io.frames import InMemoryFrames
+    from autotrack.pipeline import Pipeline, Recording
+
+    with pytest.raises(SceneError, match="control character"):
+        Landmark(bad_id, np.array([0.0, 0.0, 0.0]))
+    result = _results(0, range(2), 1)[1]
+    recorder = SessionRecorder(tmp_path / "s.mcap", source="x", tracker_params={})
+    with pytest.raises(SessionError, match="control character"):
+        recorder.log_target("t1", result, landmark_id=bad_id)
+    with pytest.raises(SessionError, match="control character"):
+        recorder.log_event("box_drawn", 0, "t1", landmark_id=bad_id)
+    recorder.close()
+    # A pipeline refuses such a landmark before its session file is created.
+    frames, boxes = _generated_sequence(3)
+    scene = Scene(
+        CameraIntrinsics(300.0, 300.0, 160.0, 120.0, (), 320, 240),
+        (
+            Landmark("L1", np.array([0.0, 0.0, 0.0])),
+            Landmark("L2", np.array([4.0, 0.0, 0.0])),
+            Landmark("L3", np.array([0.0, 3.0, 0.5])),
+            Landmark("L4", np.array([1.0, 1.0, 2.0])),
+        ),
+    )
+    sessions = tmp_path / "sessions"
+    recording = Recording(source="generated", directory=sessions)
+    source = InMemoryFrames(frames, "generated")
+    with (
+        Pipeline(source, TrackerParams(), scene=scene, recording=recording) as pipeline,
+        pytest.raises(InputError, match="unknown landmark"),
+    ):
+        pipeline.add_targets(0, {bad_id: boxes["a"]})
+    assert not sessions.exists() or list(sessions.iterdir()) == []

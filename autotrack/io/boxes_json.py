@@ -9,6 +9,7 @@ from pathlib import Path
 from typing import Any
 
 from autotrack.errors import BoxError, InputError
+from autotrack.io.ids import checked_identifier
 
 Box = tuple[float, float, float, float]
 
@@ -25,7 +26,12 @@ def read_boxes_json(path: str | Path) -> dict[str, Box] | list[Box]:
         where = f" (line {line})" if line is not None else ""
         raise InputError(f"boxes file {path} is not valid JSON{where}") from None
     if isinstance(data, dict):
-        return {str(k): _box(v, path, f"the box of {k!r}") for k, v in data.items()}
+        return {
+            checked_identifier(k, f"{path}: landmark id", BoxError): _box(
+                v, path, f"the box of {k!r}"
+            )
+            for k, v in data.items()
+        }
     if isinstance(data, list):
         return [_box(v, path, f"box {i + 1}") for i, v in enumerate(data)]
     raise InputError(f"{path}: expected {{landmark id: [x, y, w, h]}} or a list of boxes")

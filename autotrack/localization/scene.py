@@ -26,6 +26,7 @@ from typing import Any
 import numpy as np
 
 from autotrack.errors import SceneError
+from autotrack.io.ids import checked_identifier
 from autotrack.localization.camera import CameraIntrinsics
 
 # Numbers of distortion coefficients OpenCV accepts: (k1 k2 p1 p2 [k3 [k4 k5 k6 [s1..s4 [tx ty]]]]).
@@ -48,6 +49,7 @@ class Landmark:
     """Optional human-readable description."""
 
     def __post_init__(self) -> None:
+        checked_identifier(self.id, "landmark id", SceneError)
         position = np.array(self.position, dtype=np.float64).reshape(-1)
         if position.shape != (3,) or not np.all(np.isfinite(position)):
             raise SceneError(f"landmark {self.id!r}: position must be three finite numbers")
@@ -182,8 +184,7 @@ def landmark_from_dict(data: Any, position_in_file: int) -> Landmark:
     landmark_id = data["id"]
     if isinstance(landmark_id, int) and not isinstance(landmark_id, bool):
         landmark_id = str(landmark_id)
-    if not isinstance(landmark_id, str) or not landmark_id.strip():
-        raise SceneError(f"{where}.id must be a non-empty string")
+    checked_identifier(landmark_id, f"{where}.id", SceneError)
     position = data["position"]
     if not isinstance(position, list) or len(position) != 3:
         raise SceneError(f"{where}.position must be [x, y, z] in metres")

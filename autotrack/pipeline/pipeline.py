@@ -40,6 +40,7 @@ from autotrack.pipeline.targets import (
 )
 from autotrack.result import PoseEstimate, TrackResult
 from autotrack.sessions import Session, SessionRecorder
+from autotrack.sessions.messages import landmark_positions
 from autotrack.tracker.tracker import validate_box
 
 Box = tuple[float, float, float, float]
@@ -160,6 +161,8 @@ class Pipeline:
 
     def _recorder_or_none(self) -> SessionRecorder | None:
         if self._recorder is None and self.recording is not None:
+            if self.scene is not None:
+                landmark_positions(self.scene)  # its ids are refused before the file exists
             self._recorder = open_recorder(
                 self.recording, self.params, self.fps, self.resumed_from, self.frames.name
             )

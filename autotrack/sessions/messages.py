@@ -15,6 +15,7 @@ from typing import Any, Protocol
 import numpy as np
 
 from autotrack.errors import SessionError
+from autotrack.io.ids import checked_identifier
 from autotrack.result import TrackResult
 from autotrack.sessions.encoding import box_list, finite_or_none, jsonable, quantise_map
 from autotrack.sessions.schemas import (
@@ -333,5 +334,5 @@ def landmark_positions(scene: Any) -> list[tuple[str, np.ndarray]]:
         point = np.asarray(position, dtype=np.float64).reshape(-1)
         if landmark_id is None or point.shape != (3,) or not np.isfinite(point).all():
             raise SessionError(f"landmark {landmark_id!r} needs an id and a finite 3-D position")
-        result.append((str(landmark_id), point))
+        result.append((checked_identifier(str(landmark_id), "landmark id", SessionError), point))
     return result

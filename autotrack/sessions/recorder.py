@@ -29,6 +29,7 @@ from mcap.writer import CompressionType, Writer
 
 import autotrack
 from autotrack.errors import SessionError
+from autotrack.io.ids import checked_identifier
 from autotrack.params import TrackerParams
 from autotrack.result import PoseEstimate, TrackResult
 from autotrack.sessions import messages
@@ -74,6 +75,11 @@ def _check_target_id(target_id: str) -> str:
             "or '.', starting with a letter or digit"
         )
     return target_id
+
+
+def _check_landmark_id(landmark_id: str | None) -> None:
+    if landmark_id is not None:
+        checked_identifier(landmark_id, "landmark id", SessionError)
 
 
 def _safe_name(name: str) -> str:
@@ -134,6 +140,18 @@ class SessionRecorder:
         self._fsync = bool(fsync)
         params = params_dict(tracker_params)
         scene_bytes = None if scene_path is None else _read_scene(scene_path)
+        # Everything is checked and built before the file exists: a refusal leaves no file.
+        self.metadata = session_metadata(
+            source=source,
+            fps=self.fps,
+            fps_given=fps is not None,
+            params=params,
+            scene_path=scene_path,
+            embed_frames=self.embed_frames,
+            record_maps=self.record_maps,
+            flush_interval=self.flush_interval,
+            resumed_from=resumed_from,
+        )
         self._file: BinaryIO = _create_file(self.path)
         self._lock = threading.Lock()
         self._writer = Writer(
@@ -148,17 +166,6 @@ class SessionRecorder:
         self._saved_frame_index: int | None = None
         self._flush_error: BaseException | None = None
         self._closed = False
-        self.metadata = session_metadata(
-            source=source,
-            fps=self.fps,
-            fps_given=fps is not None,
-            params=params,
-            scene_path=scene_path,
-            embed_frames=self.embed_frames,
-            record_maps=self.record_maps,
-            flush_interval=self.flush_interval,
-            resumed_from=resumed_from,
-        )
         self._start(None if scene_path is None else Path(scene_path).name, scene_bytes)
         self._stop = threading.Event()
         self._flusher = threading.Thread(
@@ -214,6 +221,7 @@ class SessionRecorder:
     ) -> None:
         """Record one target in one frame: box, signals and (if record_maps) the two maps."""
         target_id = _check_target_id(target_id)
+        _check_landmark_id(landmark_id)
         rgba = _ABERRANT_RGBA
         if all(math.isfinite(v) for v in result.box):
             with self._lock:
@@ -284,6 +292,7 @@ class SessionRecorder:
             raise SessionError(f"event kind {kind!r} must be lower_snake_case, e.g. 'box_drawn'")
         if target_id is not None:
             target_id = _check_target_id(target_id)
+        _check_landmark_id(extra.get("landmark_id"))
         time_ns = frame_time_ns(frame_index, self.fps)
         message = messages.event_message(
             time_ns, str(kind), int(frame_index), target_id, box, extra, wall_time=time.time()
@@ -390,6 +399,7 @@ class SessionRecorder:
             self._writer.flush()
         except OSError as error:
             self._file.close()
+            self.path.unlink(missing_ok=True)  # a header cut short holds nothing: no orphan
             raise SessionError(f"cannot write session file {self.path}: {error}") from error
 
     def _raise_if_unusable(self) -> None:
