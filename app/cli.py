@@ -109,6 +109,11 @@ def startup_roots(sequence: Path | None, scene: Path | None, allow_roots: list[P
     return roots
 
 
+PORT_ATTEMPTS = 20
+"""A taken --port moves on to the next one, this many ports at most (viser would try 1000 and
+then wait forever, or pass 65535 and wait forever)."""
+
+
 def check_bindable(host: str) -> None:
     """Fail at once, with a message, when `host` is no address this machine can listen on
     (viser would retry port after port and then wait forever)."""
@@ -124,6 +129,33 @@ def check_bindable(host: str) -> None:
         raise InputError(
             f"--host {host}: cannot listen there ({error.strerror or error})"
         ) from error
+
+
+def _port_is_free(host: str, port: int) -> bool:
+    """Every address of `host` can listen on `port` (as asyncio binds it: SO_REUSEADDR)."""
+    for family, kind, proto, _name, address in socket.getaddrinfo(
+        host or None, port, type=socket.SOCK_STREAM, flags=socket.AI_PASSIVE
+    ):
+        try:
+            with socket.socket(family, kind, proto) as probe:
+                probe.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+                probe.bind(address)
+        except OSError:
+            return False
+    return True
+
+
+def free_port(host: str, first: int) -> int:
+    """The first port from `first` that `host` can listen on (0: the OS picks one), trying
+    PORT_ATTEMPTS ports and never past 65535; InputError when all are taken."""
+    if first == 0:
+        return 0
+    last = min(first + PORT_ATTEMPTS - 1, 65535)
+    for port in range(first, last + 1):
+        if _port_is_free(host, port):
+            return port
+    span = f"{first}" if last == first else f"{first}-{last}"
+    raise InputError(f"--port {first}: port {span} on {host} is taken; give another --port")
 
 
 def rendered_demo() -> Path:
@@ -162,6 +194,7 @@ def run(args: argparse.Namespace) -> int:
         raise InputError(f"--max-targets must be at least 1, got {args.max_targets}")
     roots = startup_roots(args.sequence, args.scene, args.allow_roots)
     check_bindable(args.host)
+    port = free_port(args.host, args.port)
 
     from app.server import StudioServer  # viser loads only when the app starts
 
@@ -169,7 +202,7 @@ def run(args: argparse.Namespace) -> int:
         sequence=None if args.sequence is None else args.sequence.resolve(),
         scene=None if args.scene is None else args.scene.resolve(),
         host=args.host,
-        port=args.port,
+        port=port,
         sessions_dir=args.sessions,
         allowed_roots=tuple(roots),
         tracker_preset=args.preset,

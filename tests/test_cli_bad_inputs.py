@@ -201,3 +201,54 @@ def test_control_characters_in_ids_are_refused_as_the_file_is_read(
     assert done.returncode == 2 and "holds a control character" in done.stderr, done.stderr
     assert done.stderr.count("\n") == 1 and option[1] in done.stderr
     assert not (workspace / "new.mcap").exists()
+
+
+def _occupy(first: int, count: int) -> list:
+    """Listening sockets on 127.0.0.1 ports first..first+count-1 (empty if one is taken)."""
+    import socket
+
+    held = []
+    try:
+        for port in range(first, first + count):
+            listener = socket.socket()
+            held.append(listener)
+            listener.bind(("127.0.0.1", port))
+            listener.listen()
+    except OSError:
+        for listener in held:
+            listener.close()
+        return []
+    return held
+
+
+@pytest.mark.parametrize("where", ["a block of ports", "the top of the range"])
+def test_app_with_every_port_taken_ends_in_one_line(workspace: Path, where: str) -> None:
+    """viser would try port after port, then (or past 65535) wait forever."""
+    import random
+
+    from app.cli import PORT_ATTEMPTS
+
+    count = PORT_ATTEMPTS if where == "a block of ports" else 4
+    held: list = []
+    for _ in range(50):
+        first = random.randrange(20_000, 60_000) if count == PORT_ATTEMPTS else 65536 - count
+        held = _occupy(first, count)
+        if held or count != PORT_ATTEMPTS:
+            break
+    if not held:
+        pytest.skip(f"ports {first}.. are in use on this machine")
+    try:
+        done = subprocess.run(
+            [sys.executable, "-m", "autotrack.cli", "app", "demo", "--port", str(first)]
+            + ["--sessions", str(workspace / "port_sessions")],
+            cwd=workspace,
+            capture_output=True,
+            text=True,
+            timeout=120,
+        )
+    finally:
+        for listener in held:
+            listener.close()
+    assert done.returncode == 2, done.stderr
+    assert done.stderr.count("\n") == 1 and "is taken" in done.stderr, done.stderr
+    assert "Server stopped" not in done.stdout + done.stderr
