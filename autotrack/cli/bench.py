@@ -89,6 +89,7 @@ def run(args: argparse.Namespace) -> int:
     )
     from autotrack.evaluation.datasets import load_sequences
     from autotrack.evaluation.distributed import cluster_executor_for
+    from autotrack.io.atomic import write_text
 
     check_output_file(args.json, "--json", force=args.force)
     trackers = validate_tracker_names(args.trackers.split(","))
@@ -113,7 +114,7 @@ def run(args: argparse.Namespace) -> int:
     print(format_table(summaries))
     if args.json is not None:
         args.json.parent.mkdir(parents=True, exist_ok=True)
-        args.json.write_text(json.dumps(summary_json(summaries, args.root), indent=2) + "\n")
+        write_text(args.json, json.dumps(summary_json(summaries, args.root), indent=2) + "\n")
         print(f"summary: {args.json}")
     if args.plots:
         written = write_run_plots(summaries, args.out / "plots", title=args.root.name)

@@ -22,7 +22,7 @@ import json
 import math
 import os
 import time
-from collections.abc import Callable, Iterator, Mapping, Sequence
+from collections.abc import Iterator, Mapping, Sequence
 from concurrent.futures import Executor, Future, ProcessPoolExecutor, as_completed
 from contextlib import contextmanager, nullcontext
 from dataclasses import dataclass, field
@@ -47,6 +47,7 @@ from autotrack.evaluation.metrics import (
 )
 from autotrack.evaluation.peers import TRACKER_NAMES, colour_feature_of, make_tracker
 from autotrack.io import otb_boxes
+from autotrack.io.atomic import write_text
 
 DEFAULT_OUT_DIR = Path("results")
 """Where results go when no --out is given (relative to the current directory)."""
@@ -143,17 +144,11 @@ def result_paths(out_dir: Path, tracker: str, sequence: str) -> tuple[Path, Path
     return folder / f"{sequence}.txt", folder / f"{sequence}.time.json"
 
 
-def _write_atomic(path: Path, write: Callable[[Path], object]) -> None:
-    temporary = path.with_name(f".{path.name}.partial")
-    write(temporary)
-    os.replace(temporary, path)
-
-
 def save_result(out_dir: Path, result: TaskResult, colour_feature: str | None) -> None:
     """Write the box file, then the timing file (its presence marks the pair as done)."""
     boxes_path, timing_path = result_paths(out_dir, result.tracker, result.sequence)
     boxes_path.parent.mkdir(parents=True, exist_ok=True)
-    _write_atomic(boxes_path, lambda path: otb_boxes.write_boxes(path, result.boxes))
+    otb_boxes.write_boxes(boxes_path, result.boxes)  # each file whole or not at all
     timing = {
         "tracker": result.tracker,
         "sequence": result.sequence,
@@ -162,7 +157,7 @@ def save_result(out_dir: Path, result: TaskResult, colour_feature: str | None) -
         "seconds": result.seconds,
         "times": [float(t) for t in result.times],
     }
-    _write_atomic(timing_path, lambda path: path.write_text(json.dumps(timing) + "\n"))
+    write_text(timing_path, json.dumps(timing) + "\n")
 
 
 def load_result(

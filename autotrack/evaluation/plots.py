@@ -17,6 +17,7 @@ from matplotlib.figure import Figure
 
 from autotrack.evaluation.datasets import ATTRIBUTE_FULL_NAMES
 from autotrack.evaluation.metrics import PRECISION_THRESHOLDS, SUCCESS_THRESHOLDS, SummaryScore
+from autotrack.io.atomic import write_figure
 
 _LINE_STYLES = ("-", "--", "-.", ":")
 
@@ -63,8 +64,7 @@ def _plot(
     axes.legend(loc=legend_location, fontsize="small")
     figure.tight_layout()
     path.parent.mkdir(parents=True, exist_ok=True)
-    figure.savefig(path)
-    return path
+    return write_figure(path, figure)
 
 
 def plot_precision(curves: Mapping[str, SummaryScore], path: str | Path, title: str) -> Path:

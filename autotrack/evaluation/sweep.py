@@ -17,7 +17,6 @@ benchmark's `run_task`, so the same executors run it (inline, a local process po
 
 from __future__ import annotations
 
-import csv
 import dataclasses
 import itertools
 import json
@@ -47,6 +46,8 @@ from autotrack.evaluation.benchmark import (
     summarize_run,
 )
 from autotrack.evaluation.datasets import Sequence as BenchmarkSequence
+from autotrack.io.atomic import write_figure, write_text
+from autotrack.io.csv_table import write_csv as write_table
 from autotrack.params import TrackerParams
 
 RUNS_FOLDER = "runs"
@@ -205,7 +206,7 @@ def _claim_folder(runs_dir: Path, combination: Combination) -> None:
             f"use another --out, or delete that folder to rerun it"
         )
     folder.mkdir(parents=True, exist_ok=True)
-    params_path.write_text(expected, encoding="utf-8")
+    write_text(params_path, expected)
 
 
 @dataclass(frozen=True, eq=False)
@@ -375,23 +376,20 @@ def format_markdown(rows: Sequence[SweepRow]) -> str:
 def write_csv(path: Path, rows: Sequence[SweepRow]) -> None:
     """The table as CSV, full precision (parameters, precision, auc, fps_median, fps_overall,
     frames)."""
-    with path.open("w", newline="", encoding="utf-8") as handle:
-        writer = csv.writer(handle)
-        writer.writerow(
-            [name for name, _ in rows[0].values]
-            + ["precision", "auc", "fps_median", "fps_overall", "frames"]
-        )
-        for row in rows:
-            writer.writerow(
-                [format_value(value) for _, value in row.values]
-                + [
-                    f"{row.precision:.6f}",
-                    f"{row.auc:.6f}",
-                    f"{row.fps_median:.3f}",
-                    f"{row.fps_overall:.3f}",
-                    row.frames,
-                ]
-            )
+    header = [name for name, _ in rows[0].values]
+    header += ["precision", "auc", "fps_median", "fps_overall", "frames"]
+    table = [
+        [format_value(value) for _, value in row.values]
+        + [
+            f"{row.precision:.6f}",
+            f"{row.auc:.6f}",
+            f"{row.fps_median:.3f}",
+            f"{row.fps_overall:.3f}",
+            row.frames,
+        ]
+        for row in rows
+    ]
+    write_table(path, header, table, line_end="\r\n")
 
 
 def write_plot(path: Path, rows: Sequence[SweepRow], title: str = "") -> Path:
@@ -420,8 +418,7 @@ def write_plot(path: Path, rows: Sequence[SweepRow], title: str = "") -> Path:
     if title:
         panels[0].set_title(title)
     figure.tight_layout()
-    figure.savefig(path)
-    return path
+    return write_figure(path, figure)
 
 
 def write_outputs(
@@ -432,7 +429,7 @@ def write_outputs(
     csv_path, md_path = out_dir / "sweep.csv", out_dir / "sweep.md"
     json_path, png_path = out_dir / "sweep.json", out_dir / "sweep.png"
     write_csv(csv_path, rows)
-    md_path.write_text(format_markdown(rows) + "\n", encoding="utf-8")
+    write_text(md_path, format_markdown(rows) + "\n")
     summary = {
         **(meta or {}),
         "notes": "precision: mean P@20 over sequences; auc: mean success AUC; fps_median: median "
@@ -450,7 +447,7 @@ def write_outputs(
             for row in rows
         ],
     }
-    json_path.write_text(json.dumps(summary, indent=2) + "\n", encoding="utf-8")
+    write_text(json_path, json.dumps(summary, indent=2) + "\n")
     write_plot(png_path, rows, title)
     return [csv_path, md_path, json_path, png_path]
 

@@ -23,6 +23,7 @@ from pathlib import Path
 import numpy as np
 
 from autotrack.errors import InputError
+from autotrack.io.atomic import write_bytes
 from autotrack.io.mot import track_boxes, visible_rows
 
 CVAT_VERSION = "1.1"
@@ -127,7 +128,7 @@ def write_cvat_video(
                 _box_element(track, frame, boxes[frame - 1], keyframe=True, outside=True)
     ElementTree.indent(root)
     path = Path(path)
-    ElementTree.ElementTree(root).write(path, encoding="utf-8", xml_declaration=True)
+    write_bytes(path, ElementTree.tostring(root, encoding="utf-8", xml_declaration=True))
     return path
 
 

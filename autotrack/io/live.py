@@ -16,7 +16,6 @@ as a growing FrameSource indexed by capture index (`autotrack.pipeline.live` run
 from __future__ import annotations
 
 import bisect
-import csv
 import threading
 import time
 from collections import OrderedDict
@@ -28,6 +27,7 @@ import cv2
 import numpy as np
 
 from autotrack.errors import InputError
+from autotrack.io.csv_table import write_csv
 from autotrack.io.frames import FrameSource
 
 STREAM_SCHEMES = ("rtsp://", "rtsps://", "http://", "https://", "udp://", "tcp://")
@@ -321,14 +321,13 @@ def write_frame_log(path: str | Path, summary: LiveSummary) -> Path:
     latency_ms (capture to result; empty for dropped frames)."""
     path = Path(path)
     by_index = {frame.index: frame for frame in summary.processed}
-    with path.open("w", newline="", encoding="utf-8") as handle:
-        writer = csv.writer(handle)
-        writer.writerow(["frame", "capture_time_s", "processed", "latency_ms"])
-        for index, capture_time in enumerate(summary.capture_times):
-            frame = by_index.get(index)
-            latency = "" if frame is None else f"{frame.latency * 1e3:.3f}"
-            writer.writerow([index, f"{capture_time:.6f}", int(frame is not None), latency])
-    return path
+    rows = []
+    for index, capture_time in enumerate(summary.capture_times):
+        frame = by_index.get(index)
+        latency = "" if frame is None else f"{frame.latency * 1e3:.3f}"
+        rows.append([index, f"{capture_time:.6f}", int(frame is not None), latency])
+    header = ["frame", "capture_time_s", "processed", "latency_ms"]
+    return write_csv(path, header, rows, line_end="\r\n")
 
 
 class LiveFrames(FrameSource):

@@ -16,6 +16,7 @@ from pathlib import Path
 import numpy as np
 
 from autotrack.errors import InputError
+from autotrack.io.atomic import write_text
 
 
 def visible_rows(boxes: np.ndarray) -> np.ndarray:
@@ -53,7 +54,7 @@ def write_mot(
             text = f"{frame_index + 1},{number},{x + 1:.2f},{y + 1:.2f},{w:.2f},{h:.2f},{conf:.4f}"
             rows.append((int(frame_index), number, text + ",-1,-1,-1"))
     rows.sort()
-    Path(path).write_text("".join(f"{text}\n" for _, _, text in rows), encoding="utf-8")
+    write_text(path, "".join(f"{text}\n" for _, _, text in rows))
     return ids
 
 

@@ -9,6 +9,7 @@ from pathlib import Path
 import numpy as np
 
 from autotrack.errors import InputError
+from autotrack.io.atomic import write_text
 
 _SEPARATORS = re.compile(r"[,;\s]+")
 
@@ -50,7 +51,7 @@ def write_boxes(path: str | Path, boxes: np.ndarray) -> None:
     out = np.array(boxes, dtype=np.float64).reshape(-1, 4).copy()
     out[:, :2] += 1.0
     lines = [",".join(_format_number(v) for v in row) for row in out]
-    Path(path).write_text("\n".join(lines) + "\n", encoding="utf-8")
+    write_text(path, "\n".join(lines) + "\n")
 
 
 def _format_number(value: float) -> str:

@@ -8,6 +8,7 @@ from pathlib import Path
 import numpy as np
 
 from autotrack.errors import InputError
+from autotrack.io.atomic import write_text
 
 
 def write_tum(
@@ -33,7 +34,7 @@ def write_tum(
             continue
         lines.append(" ".join(f"{v:.6f}" if k == 0 else f"{v:.9g}" for k, v in enumerate(row)))
         written += 1
-    Path(path).write_text("\n".join(lines) + "\n", encoding="utf-8")
+    write_text(path, "\n".join(lines) + "\n")
     return written
 
 

@@ -26,6 +26,7 @@ from typing import Any
 import numpy as np
 
 from autotrack.errors import SceneError
+from autotrack.io.atomic import write_text
 from autotrack.io.ids import checked_identifier
 from autotrack.localization.camera import CameraIntrinsics
 
@@ -275,7 +276,7 @@ def save_scene(scene: Scene, path: str | Path) -> None:
     if "description" in data:
         lines.append(f'  "description": {json.dumps(data["description"])}')
     lines.append("}")
-    Path(path).write_text("\n".join(lines) + "\n", encoding="utf-8")
+    write_text(path, "\n".join(lines) + "\n")
 
 
 def check_scene(scene: Scene, *, tolerance_m: float = 0.01) -> None:

@@ -19,6 +19,7 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from autotrack.errors import InputError
+from autotrack.io.atomic import write_image, write_text
 from autotrack.io.tum import write_tum
 from autotrack.localization.camera import CameraIntrinsics, project_points
 from autotrack.localization.scene import Scene, save_scene
@@ -308,8 +309,7 @@ def render_sequence(
             noise_offset=(int(rng.integers(0, 64)), int(rng.integers(0, 64))),
         )
         path = out / "img" / f"{index + 1:05d}.jpg"
-        if not cv2.imwrite(str(path), frame, [cv2.IMWRITE_JPEG_QUALITY, settings.jpeg_quality]):
-            raise InputError(f"cannot write {path}")
+        write_image(path, frame, [cv2.IMWRITE_JPEG_QUALITY, settings.jpeg_quality])
         if progress is not None:
             progress(1)
     return out
@@ -329,7 +329,7 @@ def write_sequence_truth(
     first_boxes = [
         f"  {json.dumps(k)}: [{', '.join(f'{v:.2f}' for v in b[0])}]" for k, b in boxes.items()
     ]
-    (out / "boxes.json").write_text("{\n" + ",\n".join(first_boxes) + "\n}\n", encoding="utf-8")
+    write_text(out / "boxes.json", "{\n" + ",\n".join(first_boxes) + "\n}\n")
     write_tum(
         out / "poses_gt.tum",
         timestamps,
@@ -338,7 +338,7 @@ def write_sequence_truth(
     )
     for landmark_id, rows in boxes.items():
         lines = [",".join(f"{v:.2f}" for v in row) for row in rows]
-        (out / "groundtruth" / f"{landmark_id}.txt").write_text("\n".join(lines) + "\n")
+        write_text(out / "groundtruth" / f"{landmark_id}.txt", "\n".join(lines) + "\n")
 
 
 def _write_ground_truth(
@@ -371,4 +371,4 @@ def _write_ground_truth(
         "boxes": "x,y,w,h, 0-based pixels (the top-left pixel's centre is (0, 0))",
         "poses": "TUM, camera-to-world, OpenCV camera axes (x right, y down, z forward)",
     }
-    (out / "sequence.json").write_text(json.dumps(metadata, indent=2) + "\n", encoding="utf-8")
+    write_text(out / "sequence.json", json.dumps(metadata, indent=2) + "\n")

@@ -28,6 +28,7 @@ import cv2
 import numpy as np
 
 from autotrack.errors import InputError
+from autotrack.io.atomic import write_image, write_text
 from autotrack.localization.camera import project_points
 from autotrack.synthetic.renderer import Renderer, _blur_vector, write_sequence_truth
 from autotrack.synthetic.trajectories import (
@@ -343,8 +344,7 @@ def render_scenario(
             noise_offset=(int(rng.integers(0, 64)), int(rng.integers(0, 64))),
         )
         target = out / "img" / f"{index + 1:05d}.jpg"
-        if not cv2.imwrite(str(target), frame, [cv2.IMWRITE_JPEG_QUALITY, settings.jpeg_quality]):
-            raise InputError(f"cannot write {target}")
+        write_image(target, frame, [cv2.IMWRITE_JPEG_QUALITY, settings.jpeg_quality])
         if progress is not None:
             progress(1)
     return out
@@ -358,7 +358,7 @@ def _write_case_files(out: Path, spec: ScenarioSpec, fractions: dict[str, np.nda
     rows += [
         f"{k}," + ",".join(f"{fractions[i][k]:.3f}" for i in ids) for k in range(sequence.frames)
     ]
-    (out / "visibility.csv").write_text("\n".join(rows) + "\n", encoding="utf-8")
+    write_text(out / "visibility.csv", "\n".join(rows) + "\n")
     metadata = {
         "name": spec.case,
         "case": spec.case,
@@ -375,7 +375,7 @@ def _write_case_files(out: Path, spec: ScenarioSpec, fractions: dict[str, np.nda
         "boxes": "x,y,w,h, 0-based pixels (the top-left pixel's centre is (0, 0))",
         "poses": "TUM, camera-to-world, OpenCV camera axes (x right, y down, z forward)",
     }
-    (out / "sequence.json").write_text(json.dumps(metadata, indent=2) + "\n", encoding="utf-8")
+    write_text(out / "sequence.json", json.dumps(metadata, indent=2) + "\n")
 
 
 def read_visibility(folder: str | Path) -> dict[str, np.ndarray]:

@@ -9,6 +9,7 @@ from pathlib import Path
 import numpy as np
 
 from autotrack.errors import InputError
+from autotrack.io.atomic import write_text
 from autotrack.synthetic.renderer import render_sequence
 from autotrack.synthetic.trajectories import (
     PAPER_FRAME_COUNTS,
@@ -62,7 +63,7 @@ def generate_test_bed(
         lines.append(
             f"| {spec.name} | {spec.trajectory} | {spec.frames} | {spec.seed} | {s.width}x{s.height} |"
         )
-    (out / "README.md").write_text("\n".join(lines) + "\n", encoding="utf-8")
+    write_text(out / "README.md", "\n".join(lines) + "\n")
     return folders
 
 
@@ -118,5 +119,5 @@ def generate_demo(out_dir: str | Path, seed: int = 0) -> SequenceSpec:
         period=spec.period_s,
         seed=seed,
     )
-    (Path(out_dir) / "README.md").write_text(text, encoding="utf-8")
+    write_text(Path(out_dir) / "README.md", text)
     return spec
