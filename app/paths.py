@@ -23,10 +23,11 @@ from io import BytesIO
 from pathlib import Path, PurePosixPath
 
 from autotrack.errors import InputError
+from autotrack.io.frames import IMAGE_EXTENSIONS, VIDEO_EXTENSIONS
 
-IMAGE_SUFFIXES = frozenset({".jpg", ".jpeg", ".png", ".bmp", ".tif", ".tiff", ".webp"})
+IMAGE_SUFFIXES = IMAGE_EXTENSIONS
 """Image files a sequence folder may hold (the frame reader's list)."""
-VIDEO_SUFFIXES = frozenset({".mp4", ".avi", ".mov", ".mkv", ".webm", ".m4v", ".mpg", ".mpeg"})
+VIDEO_SUFFIXES = VIDEO_EXTENSIONS  # the frame reader opens these only
 """Video containers offered in the sequence list and accepted as uploads."""
 
 

@@ -123,3 +123,52 @@ def test_real_benchmark_sequence():
     assert len(source) == 120
     assert source.frame_size == (360, 240)
     assert source.read(119).shape == (240, 360, 3)
+
+
+def _playlist_to_outside_video(tmp_path: Path) -> tuple[Path, Path]:
+    """An allowed root holding playlists (HLS, concat) that point at a video outside it."""
+    outside, root = tmp_path / "outside", tmp_path / "root"
+    outside.mkdir()
+    root.mkdir()
+    secret = outside / "secret.avi"
+    writer = cv2.VideoWriter(str(secret), cv2.VideoWriter_fourcc(*"MJPG"), 10, (64, 48))
+    for k in range(5):
+        writer.write(np.full((48, 64, 3), 40 * k, np.uint8))
+    writer.release()
+    playlist = (
+        "#EXTM3U\n#EXT-X-VERSION:3\n#EXT-X-TARGETDURATION:1\n"
+        f"#EXTINF:1.0,\n{secret}\n#EXT-X-ENDLIST\n"
+    )
+    for name in ("list.m3u8", "list.txt", "list.mp4"):
+        (root / name).write_text(playlist)
+    (root / "concat.mp4").write_text(f"ffconcat version 1.0\nfile '{secret}'\n")
+    return root, secret
+
+
+@pytest.mark.parametrize("name", ["list.m3u8", "list.txt", "list.mp4", "concat.mp4"])
+def test_a_playlist_cannot_open_a_video_outside_its_folder(tmp_path, name):
+    root, secret = _playlist_to_outside_video(tmp_path)
+    assert len(open_frames(secret)) == 5  # the video itself is readable
+    refusal = "cannot open video" if name.endswith(".mp4") else "not a video file"
+    with pytest.raises(InputError, match=refusal):
+        open_frames(root / name)
+
+
+def test_ffmpeg_options_alone_stop_a_playlist(tmp_path, monkeypatch):
+    """With the extension check out of the way, the FFmpeg options (file protocol, container
+    demuxers) still keep an HLS playlist from opening the video it names: OpenCV really
+    reads OPENCV_FFMPEG_CAPTURE_OPTIONS here."""
+    from autotrack.io import frames
+
+    root, _secret = _playlist_to_outside_video(tmp_path)
+    monkeypatch.setattr(frames, "VIDEO_EXTENSIONS", frames.VIDEO_EXTENSIONS | {".m3u8"})
+    capture = frames.open_local_video(root / "list.m3u8")
+    try:
+        assert not capture.isOpened()
+    finally:
+        capture.release()
+    plain = cv2.VideoCapture(str(root / "list.m3u8"), cv2.CAP_FFMPEG)  # what it guards against
+    try:
+        assert plain.isOpened() and plain.grab()
+    finally:
+        plain.release()

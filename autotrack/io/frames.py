@@ -10,6 +10,8 @@ backward steps, and a longer backward jump re-opens the video and decodes from t
 
 from __future__ import annotations
 
+import os
+import threading
 from abc import ABC, abstractmethod
 from collections import OrderedDict
 from collections.abc import Iterator, Sequence
@@ -23,6 +25,28 @@ from autotrack.errors import InputError
 
 IMAGE_EXTENSIONS = frozenset({".jpg", ".jpeg", ".png", ".bmp", ".tif", ".tiff", ".webp"})
 """File extensions (lower case) read as frames."""
+VIDEO_EXTENSIONS = frozenset(
+    {".mp4", ".m4v", ".mov", ".avi", ".mkv", ".webm", ".mpg", ".mpeg", ".ts", ".wmv", ".flv"}
+)
+"""Video container extensions (lower case) opened as videos; any other file is refused (FFmpeg
+would otherwise open a text file as a playlist)."""
+VIDEO_DEMUXERS = (
+    "mov,mp4,m4a,3gp,3g2,mj2",
+    "m4v",
+    "avi",
+    "matroska,webm",
+    "mpeg",
+    "mpegts",
+    "asf",
+    "flv",
+)
+"""The FFmpeg demuxers a local video may be read with: containers only, so no playlist (hls),
+concat list or image pattern can make FFmpeg open files outside the allowed folders."""
+LOCAL_CAPTURE_OPTIONS = "protocol_whitelist;file|format_whitelist;" + ",".join(VIDEO_DEMUXERS)
+"""FFmpeg options for local video files (OpenCV reads OPENCV_FFMPEG_CAPTURE_OPTIONS when it
+opens a capture): the file protocol only, and the demuxers above."""
+_CAPTURE_OPTIONS = "OPENCV_FFMPEG_CAPTURE_OPTIONS"
+_CAPTURE_OPTIONS_LOCK = threading.Lock()
 
 VIDEO_CACHE_FRAMES = 16
 """Decoded video frames kept for backward steps without re-decoding."""
@@ -39,6 +63,26 @@ def list_image_files(folder: Path) -> list[Path]:
         for entry in folder.iterdir()
         if entry.is_file() and entry.suffix.lower() in IMAGE_EXTENSIONS
     )
+
+
+def open_local_video(path: Path) -> cv2.VideoCapture:
+    """An OpenCV (FFmpeg) capture of a local video file that reads that file only: a known
+    container extension, FFmpeg restricted to the file protocol and container demuxers."""
+    if path.suffix.lower() not in VIDEO_EXTENSIONS:
+        known = ", ".join(sorted(VIDEO_EXTENSIONS))
+        raise InputError(f"{path.name}: not a video file this tool reads ({known})")
+    # The options are read from the environment as the capture opens; the lock keeps another
+    # thread's capture (a stream, which needs other protocols) from seeing them.
+    with _CAPTURE_OPTIONS_LOCK:
+        previous = os.environ.get(_CAPTURE_OPTIONS)
+        os.environ[_CAPTURE_OPTIONS] = LOCAL_CAPTURE_OPTIONS
+        try:
+            return cv2.VideoCapture(str(path), cv2.CAP_FFMPEG)
+        finally:
+            if previous is None:
+                del os.environ[_CAPTURE_OPTIONS]
+            else:
+                os.environ[_CAPTURE_OPTIONS] = previous
 
 
 def read_image(path: Path, index: int | None = None, *, bgr: bool = False) -> np.ndarray:
@@ -176,7 +220,7 @@ class VideoFrames(FrameSource):
             self._count = self._count_by_decoding()
 
     def _open(self) -> cv2.VideoCapture:
-        capture = cv2.VideoCapture(str(self.path))
+        capture = open_local_video(self.path)
         if not capture.isOpened():
             capture.release()
             raise InputError(f"cannot open video {self.path} (unsupported format or corrupt file)")

@@ -28,7 +28,7 @@ import numpy as np
 
 from autotrack.errors import InputError
 from autotrack.io.csv_table import write_csv
-from autotrack.io.frames import FrameSource
+from autotrack.io.frames import FrameSource, open_local_video
 
 STREAM_SCHEMES = ("rtsp://", "rtsps://", "http://", "https://", "udp://", "tcp://")
 """URL prefixes opened as network streams."""
@@ -77,7 +77,7 @@ def _open_capture(source: Path | str) -> tuple[cv2.VideoCapture, bool]:
                 f"no such video file: {source} (--realtime reads a camera index, an rtsp:// or "
                 "http:// stream, or a video file)"
             )
-        capture = cv2.VideoCapture(str(source))
+        capture = open_local_video(source)
         is_file = True
     else:
         capture = cv2.VideoCapture(source)
