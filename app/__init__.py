@@ -16,6 +16,7 @@ commands and playback), `display` (the thread that sends frames, plots, maps and
 `views` (the snapshots passed between them), `canvas` (letterboxing and overlays), `view3d`
 (3-D scene), `plots` (live charts), `paths` (what a browser may open; safe uploads), `exports`
 (downloads), `channel` (the per-tab connection), `access` (token, Origin and Host checks),
-`uploads` (uploads streamed to disk within the limits). Tracking, poses and recording are the
+`uploads` (uploads streamed to disk within the limits), `owners` (whose sessions and uploads a
+browser sees). Tracking, poses and recording are the
 library's `autotrack.pipeline.Pipeline`.
 """

@@ -13,6 +13,10 @@ So, as Jupyter does, the server makes a random token at start and prints it in i
 - `Host` must name this server (a loopback name, or the address it was bound to) unless it
   listens on every interface, where the token alone decides: a rebinding name is refused.
 
+The page's answer also sets `autotrack_browser_PORT`, a random id naming the browser (same
+flags, kept a year), by which tabs of one browser share sessions and uploads and do not see
+other browsers' (`app/owners.py`).
+
 viser builds its websockets server inside `ViserServer.__init__` and offers no hook, so
 `guarded_handshakes` wraps `websockets.asyncio.server.serve` while the server starts and puts
 the check in front of viser's own `process_request`. If viser stops calling `serve` that way
@@ -71,6 +75,25 @@ class AccessGuard:
         """The cookie carrying the token (per port: cookies do not separate ports)."""
         return f"autotrack_token_{self.port}"
 
+    @property
+    def browser_cookie_name(self) -> str:
+        """The cookie naming the browser (whose sessions and uploads are whose: app/owners.py)."""
+        return f"autotrack_browser_{self.port}"
+
+    def _cookie(self, headers: Headers, name: str) -> str | None:
+        cookie = SimpleCookie()
+        try:
+            cookie.load(headers.get("Cookie", ""))
+        except CookieError:
+            return None
+        morsel = cookie.get(name)
+        return None if morsel is None else morsel.value
+
+    def browser_id(self, headers: Headers) -> str | None:
+        """The browser a request (the websocket handshake) came from, if its cookie is set."""
+        value = self._cookie(headers, self.browser_cookie_name)
+        return value if value and len(value) <= 64 and value.isalnum() else None
+
     def host_allowed(self, host_header: str) -> bool:
         """Whether a request's `Host` names this server."""
         if self.bound_host in WILDCARD_HOSTS:
@@ -85,13 +108,8 @@ class AccessGuard:
         query = parse_qs(urlsplit(request.path).query).get("token", [])
         if any(hmac.compare_digest(value, self.token) for value in query):
             return True, True
-        cookie = SimpleCookie()
-        try:
-            cookie.load(request.headers.get("Cookie", ""))
-        except CookieError:
-            return False, False
-        morsel = cookie.get(self.cookie_name)
-        return morsel is not None and hmac.compare_digest(morsel.value, self.token), False
+        value = self._cookie(request.headers, self.cookie_name)
+        return value is not None and hmac.compare_digest(value, self.token), False
 
     def problem(self, request: Request) -> str | None:
         """Why `request` is refused, or None when it may go on."""
@@ -124,6 +142,12 @@ class AccessGuard:
             if response is not None and self._token_given(request)[1]:
                 response.headers["Set-Cookie"] = (
                     f"{self.cookie_name}={self.token}; Path=/; HttpOnly; SameSite=Strict"
+                )
+            page = urlsplit(request.path).path in ("/", "/index.html")
+            if response is not None and page and self.browser_id(request.headers) is None:
+                response.headers["Set-Cookie"] = (
+                    f"{self.browser_cookie_name}={secrets.token_hex(16)}; Path=/; "
+                    "Max-Age=31536000; HttpOnly; SameSite=Strict"
                 )
             return response
 

@@ -64,6 +64,14 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
         help="folder for session recordings and uploads (default ./sessions)",
     )
     parser.add_argument(
+        "--share-sessions",
+        action="store_true",
+        help=(
+            "list every browser's sessions and uploads to every browser (default: a browser "
+            "sees its own, plus the session files put directly in --sessions)"
+        ),
+    )
+    parser.add_argument(
         "--allow-root",
         dest="allow_roots",
         type=Path,
@@ -208,6 +216,7 @@ def run(args: argparse.Namespace) -> int:
         tracker_preset=args.preset,
         canvas_fps=args.canvas_fps,
         max_targets=args.max_targets,
+        share_sessions=args.share_sessions,
     )
     if args.no_token:
         config = replace(config, token=None)

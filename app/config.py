@@ -43,6 +43,9 @@ class AppConfig:
     """Secret every request must carry (in the URL, then a cookie); None: no token (warned)."""
     upload_limits: UploadLimits = field(default_factory=UploadLimits)
     """Bounds on uploads."""
+    share_sessions: bool = False
+    """List every browser's sessions and uploads to every tab (default: each browser sees its
+    own and those the operator put in the sessions folder; app/owners.py)."""
 
     @property
     def upload_dir(self) -> Path:
@@ -54,8 +57,10 @@ class AppConfig:
         """Folder receiving uploads while they arrive (outside every folder a tab may open)."""
         return self.sessions_dir / ".incoming"
 
-    def browsable_roots(self) -> tuple[Path, ...]:
-        """Every folder a tab may open things from: the allowed roots, the demo, the uploads."""
+    def browsable_roots(self, uploads: tuple[Path, ...] | None = None) -> tuple[Path, ...]:
+        """Every folder a tab may open things from: the allowed roots, the demo, the uploads
+        (`uploads`: the upload folders of the tab's browser; default: the whole folder)."""
         self.upload_dir.mkdir(parents=True, exist_ok=True)
-        extra = [root for root in (self.demo_dir, self.upload_dir) if root.is_dir()]
+        upload_roots = (self.upload_dir,) if uploads is None else uploads
+        extra = [root for root in (self.demo_dir, *upload_roots) if root.is_dir()]
         return normalise_roots([*self.allowed_roots, *extra])

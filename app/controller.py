@@ -20,6 +20,7 @@ from app.boxes import Box, ground_truth_positions, overlapped_target
 from app.config import AppConfig
 from app.groundtruth import load_truth, truth_view
 from app.landmarks import LandmarkTies, search_message
+from app.owners import BrowserSpace
 from app.paths import display_name, find_sequences, resolve_user_path, store_upload
 from app.recordings import RecordingRegistry
 from app.views import FrameView, frame_view
@@ -33,13 +34,10 @@ from autotrack.localization.scene import Scene, load_scene
 from autotrack.params import PRESETS, preset
 from autotrack.pipeline import Pipeline, Recording, TrackedTarget
 from autotrack.sessions import open_session
-from autotrack.sessions.snapshot import finished_copy
 
-EXPORTS = ("tracks", "poses", "mcap")
 POSE_OPTIONS = {"refine_params": RefineParams(), "reacquire_params": ReacquireParams()}
 """With a scene, the pipeline gives the solver sub-pixel landmark points and re-acquires lost
 landmarks, as `autotrack localize` does."""
-"""What `export` can build: the tracks zip, the TUM poses, the session file itself."""
 
 
 class TabController:
@@ -61,8 +59,11 @@ class TabController:
         recordings: RecordingRegistry,
         tab_id: int,
         on_visit: Callable[[], None] | None = None,
+        space: BrowserSpace | None = None,
     ) -> None:
         self.config = config
+        self.space = space or BrowserSpace(config.sessions_dir, config.upload_dir, None)
+        """Where this tab's recordings and uploads go, and whose it may list."""
         self.roots = roots
         self.recordings = recordings
         self.tab_id = tab_id
@@ -136,7 +137,7 @@ class TabController:
 
     def refresh_sequences(self) -> None:
         """List the sequences under this tab's folders."""
-        found = find_sequences(self.roots)
+        found = [path for path in find_sequences(self.roots) if not self.space.hides(path)]
         self.sequence_choices = {display_name(path, self.roots): path for path in found}
 
     def open_listed(self, name: str) -> None:
@@ -148,14 +149,22 @@ class TabController:
 
     def open_typed(self, text: str) -> None:
         """Open a sequence path typed by the user (it must lie under the allowed folders)."""
-        self.open(resolve_user_path(text, self.roots), None)
+        self.open(self._resolve(text), None)
 
     def use_scene(self, text: str) -> None:
         """Reopen the sequence with the scene file typed by the user (empty: no scene)."""
         if self.sequence_path is None:
             raise InputError("open a sequence first")
-        scene = resolve_user_path(text.strip(), self.roots) if text.strip() else None
+        scene = self._resolve(text.strip()) if text.strip() else None
         self.open(self.sequence_path, scene, scene_given=True)
+
+    def _resolve(self, text: str) -> Path:
+        """A path the user typed (or a session names), under this tab's folders and not in
+        another browser's space (app/owners.py)."""
+        path = resolve_user_path(text, self.roots)
+        if self.space.hides(path):
+            raise InputError(f"{text}: no such file or folder among those this tab may open")
+        return path
 
     def choose_preset(self, name: str) -> None:
         """Use tracker preset `name` for the sequences opened from now on."""
@@ -166,8 +175,10 @@ class TabController:
     def open_upload(self, file_name: str, content: bytes | Path) -> None:
         """Store an uploaded video or zip of images (bytes or a received file) safely, then
         open it."""
-        config = self.config
-        path = store_upload(file_name, content, config.upload_dir, config.upload_limits)
+        limits, quota_root = self.config.upload_limits, self.config.upload_dir
+        path = store_upload(
+            file_name, content, self.space.upload_dir, limits, quota_root=quota_root
+        )
         self.refresh_sequences()
         self.open(path, None)
 
@@ -207,9 +218,7 @@ class TabController:
 
     def _recording(self, path: Path, scene_path: Path | None) -> Recording:
         """A new session file in the sessions folder, created at the first box."""
-        return Recording(
-            source=str(path), directory=self.config.sessions_dir, scene_path=scene_path
-        )
+        return Recording(source=str(path), directory=self.space.sessions_dir, scene_path=scene_path)
 
     def _start(self, run: Pipeline, path: Path, scene_path: Path | None) -> None:
         """Make `run` (on the sequence `path`) this tab's run, replacing the current one."""
@@ -419,11 +428,8 @@ class TabController:
     # -- sessions -----------------------------------------------------------------------------
 
     def refresh_sessions(self) -> None:
-        """List the recorded sessions, newest first."""
-        files = sorted(
-            self.config.sessions_dir.glob("*.mcap"), key=lambda p: p.stat().st_mtime, reverse=True
-        )
-        self.session_choices = {path.name: path for path in files}
+        """List the recorded sessions this tab's browser may see (app/owners.py), newest first."""
+        self.session_choices = {path.name: path for path in self.space.session_files()}
 
     def reopen(self, name: str) -> None:
         """Reopen the session listed as `name` and continue it into a new session file, with
@@ -434,10 +440,8 @@ class TabController:
         if self.recordings.writer_of(path) is not None:
             raise InputError(f"{path.name} is being recorded by another tab; reopen it later")
         session = open_session(path)
-        source = resolve_user_path(session.source, self.roots)
-        scene_path = (
-            resolve_user_path(session.scene_path, self.roots) if session.scene_path else None
-        )
+        source = self._resolve(session.source)
+        scene_path = self._resolve(session.scene_path) if session.scene_path else None
         frames, scene, scene_path = self._load(source, scene_path, scene_given=True)
         try:
             run = Pipeline.resume(
@@ -461,20 +465,13 @@ class TabController:
         )
 
     def export(self, what: str) -> tuple[str, bytes]:
-        """(file name, content) of a download: 'tracks', 'poses' or 'mcap' (see EXPORTS)."""
+        """(file name, content) of a download: 'tracks', 'poses' or 'mcap' (exports.EXPORTS)."""
         run = self.require_run()
         path = run.session_path
         if path is None:
             raise InputError("nothing recorded yet: draw a box and track first")
         run.flush()
-        if what == "tracks":
-            name, content = f"{path.stem}_tracks.zip", exports.tracks_zip(path)
-        elif what == "poses":
-            name, content = f"{path.stem}_poses.tum", exports.poses_tum(path)
-        elif what == "mcap":
-            name, content = path.name, finished_copy(path)  # a finished snapshot
-        else:
-            raise InputError(f"unknown export {what!r}; choose one of {EXPORTS}")
+        name, content = exports.session_download(path, what)
         self.message = f"Sent {name} ({len(content) / 1024:.0f} kB)."
         return name, content
 
@@ -494,3 +491,4 @@ class TabController:
         """Stop playing and close the run (finishing its recording)."""
         self.stop_playing()
         self.close_run()
+        self.space.release()

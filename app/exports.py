@@ -7,7 +7,23 @@ import zipfile
 from io import BytesIO
 from pathlib import Path
 
+from autotrack.errors import InputError
 from autotrack.sessions import open_session, write_otb_tracks, write_tracks_csv, write_tum_poses
+from autotrack.sessions.snapshot import finished_copy
+
+EXPORTS = ("tracks", "poses", "mcap")
+"""What a tab can download: the tracks zip, the TUM poses, the session file itself."""
+
+
+def session_download(path: Path, what: str) -> tuple[str, bytes]:
+    """(file name, content) of the download `what` (one of EXPORTS) of the session `path`."""
+    if what == "tracks":
+        return f"{path.stem}_tracks.zip", tracks_zip(path)
+    if what == "poses":
+        return f"{path.stem}_poses.tum", poses_tum(path)
+    if what == "mcap":
+        return path.name, finished_copy(path)  # a finished snapshot
+    raise InputError(f"unknown export {what!r}; choose one of {EXPORTS}")
 
 
 def tracks_zip(session_path: Path) -> bytes:

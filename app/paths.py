@@ -22,6 +22,7 @@ from dataclasses import dataclass
 from io import BytesIO
 from pathlib import Path, PurePosixPath
 
+from app.owners import SPACE_PREFIX
 from autotrack.errors import InputError
 from autotrack.io.frames import IMAGE_EXTENSIONS, VIDEO_EXTENSIONS
 
@@ -157,12 +158,14 @@ def find_sequences(roots: Sequence[Path], max_depth: int = 4, limit: int = 500) 
 
 
 def display_name(path: Path, roots: Sequence[Path]) -> str:
-    """`path` relative to the root that holds it (prefixed by the root's name)."""
+    """`path` relative to the root that holds it (prefixed by the root's name; a browser's
+    own upload folder is named after the uploads folder that holds it)."""
     for root in roots:
+        label = root.parent.name if root.name.startswith(SPACE_PREFIX) else root.name
         if path == root:
-            return root.name
+            return label
         if path.is_relative_to(root):
-            return f"{root.name}/{path.relative_to(root).as_posix()}"
+            return f"{label}/{path.relative_to(root).as_posix()}"
     return path.name
 
 
@@ -201,7 +204,9 @@ def _member_problem(info: zipfile.ZipInfo) -> str | None:
     return None
 
 
-def extract_image_zip(content: bytes | Path, destination: Path, limits: UploadLimits) -> Path:
+def extract_image_zip(
+    content: bytes | Path, destination: Path, limits: UploadLimits, quota_root: Path | None = None
+) -> Path:
     """Unpack the images of a zip into `destination/img/` and return that folder.
 
     Every member is checked before anything is written: absolute names, `..` components and
@@ -245,7 +250,7 @@ def extract_image_zip(content: bytes | Path, destination: Path, limits: UploadLi
                 f"refused the zip: {biggest.filename} is {biggest.file_size / 1e6:.0f} MB; "
                 f"the limit per image is {limits.max_image_bytes / 1e6:.0f} MB"
             )
-        room = limits.max_upload_dir_bytes - folder_bytes(destination.parent)
+        room = limits.max_upload_dir_bytes - folder_bytes(quota_root or destination.parent)
         if declared > room:
             raise InputError(
                 "the uploads folder would exceed its quota with this zip; "
@@ -296,13 +301,19 @@ def _check_pixels(name: str, head: bytes, limits: UploadLimits) -> None:
 
 
 def store_upload(
-    file_name: str, content: bytes | Path, upload_root: Path, limits: UploadLimits
+    file_name: str,
+    content: bytes | Path,
+    upload_root: Path,
+    limits: UploadLimits,
+    *,
+    quota_root: Path | None = None,
 ) -> Path:
     """Put an uploaded video or zip of images under `upload_root`; return what to open.
 
     `content` is the file's bytes or a received file (moved, not copied). A video is kept as
-    is under a sanitised name; a zip is unpacked by `extract_image_zip`. A refused upload
-    leaves nothing under `upload_root`.
+    is under a sanitised name; a zip is unpacked by `extract_image_zip`, its size held to the
+    quota of `quota_root` (default `upload_root`). A refused upload leaves nothing under
+    `upload_root`.
     """
     size = content.stat().st_size if isinstance(content, Path) else len(content)
     if size == 0:
@@ -318,7 +329,7 @@ def store_upload(
         folder = new_upload_folder(upload_root, Path(name).stem)
         try:
             if suffix == ".zip":
-                extract_image_zip(content, folder, limits)
+                extract_image_zip(content, folder, limits, quota_root or upload_root)
                 return folder
             target = folder / name
             if isinstance(content, Path):

@@ -15,6 +15,7 @@ import viser
 from app.access import AccessGuard, guarded_handshakes
 from app.channel import ClientChannel, ViserClientChannel
 from app.config import AppConfig
+from app.owners import BrowserSpace, browser_tag
 from app.recordings import RecordingRegistry
 from app.tab import Tab
 from app.uploads import UploadReceiver
@@ -67,7 +68,24 @@ class StudioServer:
         return f"http://{shown}:{self.port}{query}"
 
     def _connect(self, client: viser.ClientHandle) -> None:
-        self.open_tab(ViserClientChannel(client), client.gui, client.scene, tab_id=client.client_id)
+        self.open_tab(
+            ViserClientChannel(client),
+            client.gui,
+            client.scene,
+            tab_id=client.client_id,
+            browser_id=self._browser_of(client.client_id),
+        )
+
+    def _browser_of(self, client_id: int) -> str | None:
+        """The browser cookie of a client's websocket handshake (None if it sent none).
+
+        viser does not pass the handshake on, so it is read from viser's table of live
+        connections; if viser changes that, every tab gets a space of its own (nothing is
+        shared by mistake)."""
+        infra = getattr(self.viser, "_websock_server", None)
+        connection = getattr(infra, "_live_connections", {}).get(client_id)
+        request = getattr(connection, "request", None)
+        return None if request is None else self.access.browser_id(request.headers)
 
     def open_tab(
         self,
@@ -76,10 +94,20 @@ class StudioServer:
         scene: viser.SceneApi,
         *,
         tab_id: int,
+        browser_id: str | None = None,
     ) -> Tab:
         """Build a tab on the given GUI and scene handles (a client's, or the server's in
-        tests) and open the start-up sequence in it."""
-        tab = Tab(self.config, self.roots, self.recordings, channel, gui, scene, tab_id=tab_id)
+        tests) and open the start-up sequence in it. `browser_id` names the browser (its
+        cookie): tabs of one browser share sessions and uploads (None: a space of its own)."""
+        config = self.config
+        space = BrowserSpace(
+            config.sessions_dir,
+            config.upload_dir,
+            browser_tag(browser_id),
+            shared=config.share_sessions,
+        )
+        roots = config.browsable_roots(space.upload_roots())
+        tab = Tab(config, roots, self.recordings, channel, gui, scene, tab_id=tab_id, space=space)
         self.uploads.attach(
             gui, tab.panels.sequence.upload, tab_id, tab.receive_upload_file, tab.refuse_upload
         )

@@ -20,6 +20,7 @@ from app.channel import ClientChannel
 from app.config import AppConfig
 from app.controller import TabController
 from app.display import DisplayLoop
+from app.owners import BrowserSpace
 from app.panels import (
     CANVAS_3D,
     CANVAS_FRAME,
@@ -55,11 +56,12 @@ class Tab:
         scene_api: viser.SceneApi,
         *,
         tab_id: int,
+        space: BrowserSpace | None = None,
     ) -> None:
         self.tab_id = tab_id
         self.channel = channel
         self.controller = TabController(
-            config, roots, recordings, tab_id, on_visit=self._frame_changed
+            config, roots, recordings, tab_id, on_visit=self._frame_changed, space=space
         )
         self.panels = build_panels(gui, config)
         self.display = DisplayLoop(

@@ -379,9 +379,14 @@ def studio(tmp_path: Path):
     server.stop()
 
 
-def _open_tab(studio, tab_id: int = 1, channel: RecordingChannel | None = None):
+def _open_tab(
+    studio, tab_id: int = 1, channel: RecordingChannel | None = None, browser: str = "alice"
+):
+    """A tab of `browser` (by default every test tab is one user's: tabs of one browser)."""
     channel = channel or RecordingChannel()
-    tab = studio.open_tab(channel, studio.viser.gui, studio.viser.scene, tab_id=tab_id)
+    tab = studio.open_tab(
+        channel, studio.viser.gui, studio.viser.scene, tab_id=tab_id, browser_id=browser
+    )
     assert tab.wait_idle()
     return tab, channel
 
@@ -890,3 +895,51 @@ def test_the_3d_view_frames_landmarks_ground_truth_and_trajectory() -> None:
         for point in points:  # inside a 50° cone: visible in the 60°-wide view
             ray = (point - eye) / np.linalg.norm(point - eye)
             assert np.degrees(np.arccos(np.clip(ray @ axis, -1, 1))) < 25.0
+
+
+def test_one_browser_does_not_see_another_browsers_sessions_and_uploads(studio) -> None:
+    """Sessions and uploads are listed to the browser that made them only; a session file the
+    operator put in the sessions folder is listed to everyone (app/owners.py)."""
+    from autotrack.sessions import SessionRecorder
+
+    alice, _ = _open_tab(studio, tab_id=1, browser="alice")
+    _drag(alice, _demo_boxes()[alice.controller.run.scene.landmark_ids[0]])
+    recorded = alice.controller.run.session_path
+    frames = sorted((DEMO / "img").iterdir())[:3]
+    alice.receive_upload("clip.zip", _zip({f"clip/{p.name}": p.read_bytes() for p in frames}))
+    assert alice.wait_idle()
+    uploaded = alice.controller.sequence_path
+    with SessionRecorder.create(studio.config.sessions_dir, source="cli", tracker_params={}):
+        pass  # an operator's recording, straight in the sessions folder
+    operators = next(studio.config.sessions_dir.glob("*.mcap"))
+    studio.close_tab(1)
+
+    bob, bob_channel = _open_tab(studio, tab_id=2, browser="bob")
+    bob.controller.refresh_sessions()
+    assert list(bob.controller.session_choices) == [operators.name]
+    assert not any(path == uploaded for path in bob.controller.sequence_choices.values())
+    bob.controller.refresh_sequences()
+    assert uploaded not in bob.controller.sequence_choices.values()
+    _set(bob.panels.sequence.path, str(uploaded))
+    _click(bob.panels.sequence.open_path)
+    assert bob.wait_idle()
+    assert "no such file or folder" in bob_channel.notes[-1][0]
+    assert bob.controller.sequence_path != uploaded
+
+    again, _ = _open_tab(studio, tab_id=3, browser="alice")  # alice's next tab sees hers
+    again.controller.refresh_sessions()
+    assert {recorded.name, operators.name} <= set(again.controller.session_choices)
+    assert uploaded in again.controller.sequence_choices.values()
+
+
+def test_share_sessions_lists_every_browsers_sessions(studio) -> None:
+    from dataclasses import replace
+
+    alice, _ = _open_tab(studio, tab_id=1, browser="alice")
+    _drag(alice, _demo_boxes()[alice.controller.run.scene.landmark_ids[0]])
+    recorded = alice.controller.run.session_path
+    studio.close_tab(1)
+    studio.config = replace(studio.config, share_sessions=True)
+    bob, _ = _open_tab(studio, tab_id=2, browser="bob")
+    bob.controller.refresh_sessions()
+    assert recorded.name in bob.controller.session_choices

@@ -130,3 +130,47 @@ def test_unbindable_host_exits_with_one_line(tmp_path: Path) -> None:
     assert done.returncode == 2
     assert done.stderr.count("\n") == 1 and "--host 203.0.113.7" in done.stderr
     assert "Traceback" not in done.stderr
+
+
+def test_the_page_names_the_browser_and_its_websocket_carries_the_name(studio) -> None:
+    """The page's answer sets a random browser cookie; the server reads it back from the
+    websocket handshake of that browser's tabs (whose sessions and uploads are whose)."""
+    import time
+
+    cookies = [
+        value.split(";")[0] for key, value in _all_headers(studio.url) if key == "Set-Cookie"
+    ]
+    names = dict(cookie.split("=", 1) for cookie in cookies)
+    browser = names[f"autotrack_browser_{studio.port}"]
+    assert len(browser) == 32 and browser.isalnum()
+    token_cookie = f"autotrack_token_{studio.port}={studio.config.token}"
+    # A page that already has its name keeps it.
+    again = _all_headers(
+        f"http://127.0.0.1:{studio.port}/",
+        {"Cookie": f"{token_cookie}; autotrack_browser_{studio.port}={browser}"},
+    )
+    assert not any("autotrack_browser" in value for key, value in again if key == "Set-Cookie")
+
+    live = studio.viser._websock_server._live_connections
+    seen = set(live)
+
+    def new_client() -> int:
+        deadline = time.monotonic() + 30
+        while not set(live) - seen:
+            assert time.monotonic() < deadline
+            time.sleep(0.02)
+        (client_id,) = set(live) - seen
+        seen.add(client_id)
+        return client_id
+
+    cookie = f"{token_cookie}; autotrack_browser_{studio.port}={browser}"
+    with _websocket(studio, token=None, origin=None, cookie=cookie):
+        assert studio._browser_of(new_client()) == browser
+    with _websocket(studio, token=studio.config.token, origin=None):  # no browser cookie
+        assert studio._browser_of(new_client()) is None
+
+
+def _all_headers(url: str, headers: dict[str, str] | None = None) -> list[tuple[str, str]]:
+    request = urllib.request.Request(url, headers=headers or {})
+    with urllib.request.urlopen(request, timeout=30) as answer:
+        return list(answer.headers.items())

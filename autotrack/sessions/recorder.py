@@ -15,7 +15,6 @@ from __future__ import annotations
 
 import math
 import os
-import re
 import threading
 import time
 from collections.abc import Mapping, Sequence
@@ -29,7 +28,6 @@ from mcap.writer import CompressionType, Writer
 
 import autotrack
 from autotrack.errors import SessionError
-from autotrack.io.ids import checked_identifier
 from autotrack.params import TrackerParams
 from autotrack.result import PoseEstimate, TrackResult
 from autotrack.sessions import messages
@@ -40,6 +38,12 @@ from autotrack.sessions.encoding import (
     frame_time_ns,
 )
 from autotrack.sessions.metadata import params_dict, session_metadata
+from autotrack.sessions.names import (
+    check_event_kind,
+    check_landmark_id,
+    check_target_id,
+    safe_file_name,
+)
 from autotrack.sessions.schemas import (
     CAMERA_FRAME,
     MESSAGE_ENCODING,
@@ -52,8 +56,6 @@ from autotrack.sessions.schemas import (
 
 DEFAULT_FLUSH_INTERVAL_S = 1.0
 """Longest time a recorded message waits in memory before it reaches the OS (seconds)."""
-_TARGET_ID = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.-]{0,63}$")
-_EVENT_KIND = re.compile(r"^[a-z][a-z0-9_]{0,63}$")
 _PALETTE: tuple[tuple[float, float, float, float], ...] = (
     (0.12, 0.47, 0.71, 1.0),
     (0.17, 0.63, 0.17, 1.0),
@@ -65,26 +67,6 @@ _PALETTE: tuple[tuple[float, float, float, float], ...] = (
     (0.55, 0.34, 0.29, 1.0),
 )
 _ABERRANT_RGBA = (0.84, 0.15, 0.16, 1.0)
-
-
-def _check_target_id(target_id: str) -> str:
-    target_id = str(target_id)
-    if not _TARGET_ID.match(target_id):
-        raise SessionError(
-            f"target id {target_id!r} cannot be recorded: use 1-64 letters, digits, '_', '-' "
-            "or '.', starting with a letter or digit"
-        )
-    return target_id
-
-
-def _check_landmark_id(landmark_id: str | None) -> None:
-    if landmark_id is not None:
-        checked_identifier(landmark_id, "landmark id", SessionError)
-
-
-def _safe_name(name: str) -> str:
-    cleaned = re.sub(r"[^A-Za-z0-9_.-]+", "_", name).strip("._-")
-    return cleaned[:80] or "session"
 
 
 # --- recording --------------------------------------------------------------------------------
@@ -193,7 +175,7 @@ class SessionRecorder:
             directory.mkdir(parents=True, exist_ok=True)
         except OSError as error:
             raise SessionError(f"cannot create sessions folder {directory}: {error}") from error
-        stem = f"{datetime.now(UTC):%Y%m%d-%H%M%S}_{_safe_name(name or Path(source).name)}"
+        stem = f"{datetime.now(UTC):%Y%m%d-%H%M%S}_{safe_file_name(name or Path(source).name)}"
         for attempt in range(1, 1000):
             candidate = directory / (f"{stem}.mcap" if attempt == 1 else f"{stem}-{attempt}.mcap")
             if candidate.exists():
@@ -220,8 +202,8 @@ class SessionRecorder:
         self, target_id: str, result: TrackResult, *, landmark_id: str | None = None
     ) -> None:
         """Record one target in one frame: box, signals and (if record_maps) the two maps."""
-        target_id = _check_target_id(target_id)
-        _check_landmark_id(landmark_id)
+        target_id = check_target_id(target_id)
+        check_landmark_id(landmark_id)
         rgba = _ABERRANT_RGBA
         if all(math.isfinite(v) for v in result.box):
             with self._lock:
@@ -288,11 +270,10 @@ class SessionRecorder:
         kind: "box_drawn", "box_corrected", "box_deleted", or another lower_snake_case kind.
         extra: further JSON-serialisable details (e.g. previous_box=..., reason=...).
         """
-        if not _EVENT_KIND.match(str(kind)):
-            raise SessionError(f"event kind {kind!r} must be lower_snake_case, e.g. 'box_drawn'")
+        check_event_kind(kind)
         if target_id is not None:
-            target_id = _check_target_id(target_id)
-        _check_landmark_id(extra.get("landmark_id"))
+            target_id = check_target_id(target_id)
+        check_landmark_id(extra.get("landmark_id"))
         time_ns = frame_time_ns(frame_index, self.fps)
         message = messages.event_message(
             time_ns, str(kind), int(frame_index), target_id, box, extra, wall_time=time.time()
