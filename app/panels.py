@@ -18,6 +18,7 @@ import viser
 from app.boxes import format_box
 from app.config import AppConfig
 from app.controller import TabController
+from app.paths import display_name
 from autotrack.params import PRESETS
 
 NEW_TARGET = "new target"
@@ -321,8 +322,10 @@ def show_opened(panels: Panels, controller: TabController) -> None:
     a path being typed is not overwritten)."""
     quiet, sequence = panels.quiet, panels.sequence
     path, scene_path, run = controller.sequence_path, controller.scene_path, controller.run
-    quiet.set(sequence.path, "value", "" if path is None else str(path))
-    quiet.set(sequence.scene, "value", "" if scene_path is None else str(scene_path))
+    roots = controller.roots
+    quiet.set(sequence.path, "value", "" if path is None else display_name(path, roots))
+    shown_scene = "" if scene_path is None else display_name(scene_path, roots)
+    quiet.set(sequence.scene, "value", shown_scene)
     quiet.set(panels.playback.frame, "max", max(2, 0 if run is None else run.frame_count))
     listed = next((n for n, p in controller.sequence_choices.items() if p == path), None)
     if listed is not None:  # the list shows the sequence that is open

@@ -92,6 +92,9 @@ def resolve_user_path(text: str, roots: Sequence[Path]) -> Path:
         raise InputError("the path contains a NUL character")
     typed = Path(cleaned)
     candidates = [typed] if typed.is_absolute() else [root / typed for root in roots]
+    if not typed.is_absolute() and typed.parts:  # as the app shows it: `<root name>/...`
+        rest = Path(*typed.parts[1:]) if len(typed.parts) > 1 else Path()
+        candidates += [root / rest for root in roots if _root_label(root) == typed.parts[0]]
     for candidate in candidates:
         try:
             resolved = candidate.resolve(strict=True)
@@ -161,12 +164,31 @@ def display_name(path: Path, roots: Sequence[Path]) -> str:
     """`path` relative to the root that holds it (prefixed by the root's name; a browser's
     own upload folder is named after the uploads folder that holds it)."""
     for root in roots:
-        label = root.parent.name if root.name.startswith(SPACE_PREFIX) else root.name
+        label = _root_label(root)
         if path == root:
             return label
         if path.is_relative_to(root):
             return f"{label}/{path.relative_to(root).as_posix()}"
     return path.name
+
+
+def _root_label(root: Path) -> str:
+    """The name a root is shown by (a browser's own upload folder: `uploads`)."""
+    return root.parent.name if root.name.startswith(SPACE_PREFIX) else root.name
+
+
+_ABSOLUTE_PATH = re.compile(r"(?<![\w.~-])/(?:[^\s'\"/:]+/)*([^\s'\"/:]*)")
+
+
+def shown_paths(text: str, roots: Sequence[Path], private: Sequence[Path] = ()) -> str:
+    """`text` (a message for the browser) with the server's absolute paths hidden: a path under
+    an allowed root as the app shows it (`<root name>/...`), a path under one of the `private`
+    folders (sessions, incoming uploads) or anywhere else as its last component only."""
+    named = [(root, _root_label(root)) for root in roots]
+    named += [(folder.resolve(), folder.name) for folder in private]
+    for folder, label in sorted(named, key=lambda item: len(str(item[0])), reverse=True):
+        text = text.replace(str(folder), label)
+    return _ABSOLUTE_PATH.sub(lambda match: match.group(1) or "/", text)
 
 
 _SAFE_NAME = re.compile(r"[^A-Za-z0-9._-]+")

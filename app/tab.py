@@ -33,6 +33,7 @@ from app.panels import (
     show_state,
     show_targets,
 )
+from app.paths import shown_paths
 from app.recordings import RecordingRegistry
 from app.worker import Worker
 from autotrack.errors import InputError
@@ -154,7 +155,12 @@ class Tab:
 
     def refuse_upload(self, message: str) -> None:
         """An upload refused while it arrived: say why."""
-        self.channel.notify("AutoTrack Studio", message, error=True)
+        self.channel.notify("AutoTrack Studio", self._shown(message), error=True)
+
+    def _shown(self, message: str) -> str:
+        """`message` with the server's absolute paths hidden (app/paths.py, shown_paths)."""
+        config = self.controller.config
+        return shown_paths(message, self.controller.roots, (config.sessions_dir,))
 
     def rect_selected(self, event: viser.SceneRectSelectEvent) -> None:
         """A shift-drag on the canvas: a box at the current frame (queued)."""
@@ -244,6 +250,7 @@ class Tab:
 
     def _report(self, message: str) -> None:
         """A failed command or frame: tell the user (the panels follow after it)."""
+        message = self._shown(message)
         self.controller.message = message
         self.channel.notify("AutoTrack Studio", message, error=True)
         self._publish()

@@ -943,3 +943,38 @@ def test_share_sessions_lists_every_browsers_sessions(studio) -> None:
     bob, _ = _open_tab(studio, tab_id=2, browser="bob")
     bob.controller.refresh_sessions()
     assert recorded.name in bob.controller.session_choices
+
+
+def test_messages_and_fields_show_paths_relative_to_their_root(studio, tmp_path: Path) -> None:
+    """Nothing sent to the browser names the server's absolute paths: errors and the path
+    fields show `<root name>/...`, which the path field takes back."""
+    sessions = studio.config.sessions_dir
+    (sessions / "clips").mkdir()
+    (sessions / "clips" / "broken.mp4").write_bytes(b"not a video at all")
+    tab, channel = _open_tab(studio)
+    shown = tab.panels.sequence.path.value  # the demo, opened at start
+    assert not Path(shown).is_absolute() and shown.startswith(DEMO.name)
+    _set(tab.panels.sequence.path, str(sessions / "clips" / "broken.mp4"))
+    _click(tab.panels.sequence.open_path)
+    assert tab.wait_idle()
+    note = channel.notes[-1][0]
+    assert "sessions/clips/broken.mp4" in note and str(tmp_path) not in note, note
+    assert str(tmp_path) not in tab.controller.message
+
+    _set(tab.panels.sequence.path, shown)
+    _click(tab.panels.sequence.open_path)
+    assert tab.wait_idle()
+    assert tab.controller.sequence_path == DEMO.resolve()
+
+
+def test_shown_paths_hides_every_absolute_server_path(tmp_path: Path) -> None:
+    from app.paths import shown_paths
+
+    root = (tmp_path / "data").resolve()
+    text = (
+        f"cannot open {root}/car/x.mp4; cannot write {tmp_path}/sessions/b/s.mcap: "
+        f"[Errno 28] No space left on device: '{tmp_path}/sessions/b/s.mcap'; see /etc/passwd"
+    )
+    shown = shown_paths(text, [root], [tmp_path / "sessions"])
+    assert str(tmp_path) not in shown and "/etc" not in shown
+    assert "data/car/x.mp4" in shown and "'sessions/b/s.mcap'" in shown and "passwd" in shown
