@@ -20,8 +20,6 @@ from functools import lru_cache
 from pathlib import Path
 
 import numpy as np
-import scipy.io
-import scipy.linalg
 from numba import njit
 
 from autotrack.errors import InputError
@@ -268,6 +266,8 @@ def load_colour_table(path: str | Path) -> np.ndarray:
 
 
 def _table_from_mat(file: Path) -> np.ndarray:
+    import scipy.io  # only for .mat tables: kept off a tracking process's start-up
+
     try:
         contents = scipy.io.loadmat(file)
     except (OSError, ValueError, NotImplementedError) as error:
@@ -356,6 +356,8 @@ def lab11_projection() -> np.ndarray:
     The 11 probabilities sum to one, so projecting onto this basis loses nothing:
     p = projection.T @ feature + 1/11.
     """
+    import scipy.linalg  # once per process (cached): kept off the import of the tracker
+
     basis = scipy.linalg.helmert(len(COLOUR_TERMS))
     basis.flags.writeable = False
     return basis
