@@ -11,14 +11,35 @@ FFT runs over contiguous memory.
 
 from __future__ import annotations
 
+import sys
 from dataclasses import dataclass
 
 import numpy as np
-import pyfftw
 import scipy.fft
 from numba import njit
 
+from autotrack.tracker import admm_kernels
+
 _FFT_AXES = (-2, -1)
+
+
+def _import_pyfftw():
+    """pyFFTW without its dask interface: when dask is installed, `import pyfftw` imports
+    dask.array (~0.4 s of a fresh process's start-up) for `pyfftw.interfaces.dask_fft`, which
+    the tracker never uses. A None entry in sys.modules makes that optional import fail fast."""
+    blocked = "dask.array.fft" not in sys.modules
+    if blocked:
+        sys.modules["dask.array.fft"] = None
+    try:
+        import pyfftw
+        import pyfftw.builders
+    finally:
+        if blocked:
+            del sys.modules["dask.array.fft"]
+    return pyfftw
+
+
+pyfftw = _import_pyfftw()
 
 
 def matlab_round(values: np.ndarray | float) -> np.ndarray:
@@ -87,6 +108,15 @@ class SpectrumTransform:
             planner_effort="FFTW_ESTIMATE",
         )
         self._spectrum_shape = (channels, rows, cols // 2 + 1)
+        # The h-step's own forward plan on its own buffers (the same estimated plan as
+        # `_forward`, so the same rounding): its input is written in place by a kernel, and
+        # `forward` re-targeting `_forward`'s output array cannot touch a live h spectrum.
+        self._h_forward = pyfftw.builders.rfft2(
+            np.empty((channels, rows, cols), np.float32),
+            axes=_FFT_AXES,
+            threads=1,
+            planner_effort="FFTW_ESTIMATE",
+        )
 
     def forward(self, maps: np.ndarray) -> np.ndarray:
         """Half spectra of real maps (a new complex64 array)."""
@@ -96,6 +126,16 @@ class SpectrumTransform:
     def inverse_scratch(self, spectrum: np.ndarray) -> np.ndarray:
         """Real maps of half spectra, in a buffer the next `inverse_scratch` call overwrites."""
         return self._inverse(spectrum)
+
+    def project(self, g_f: np.ndarray, l_f: np.ndarray, gamma: float, gain: np.ndarray):
+        """F(gain * F^-1(gamma (g + l))), the h-step (eq. 12), in the transforms' own buffers.
+
+        Returns a buffer the next `project` call overwrites.
+        """
+        admm_kernels.scaled_sum(g_f, l_f, np.float32(gamma), self._inverse.input_array)
+        maps = self._inverse()  # on its own buffers; the call (not execute) scales by 1 / N
+        admm_kernels.apply_gain(maps, gain, self._h_forward.input_array)
+        return self._h_forward()
 
 
 def half_spectrum_weights(grid_size: tuple[int, int]) -> np.ndarray:
@@ -193,12 +233,13 @@ def solve_h_step(
     lambda_spatial: float,
     transform: SpectrumTransform,
 ) -> np.ndarray:
-    """Closed form of the h-subproblem in the spatial domain, returned as a half spectrum (eq. 12)."""
+    """Closed form of the h-subproblem in the spatial domain, returned as a half spectrum (eq. 12).
+
+    The result lives in `transform`'s buffer, overwritten by the next h-step.
+    """
     num_cells = transform.grid_size[0] * transform.grid_size[1]
     gain = (num_cells / (lambda_spatial * spatial_window**2 + gamma * num_cells)).astype(np.float32)
-    h = transform.inverse_scratch(np.float32(gamma) * (g_f + l_f))
-    h *= gain
-    return transform.forward(h)
+    return transform.project(g_f, l_f, gamma, gain)
 
 
 def train_filter(
@@ -217,10 +258,10 @@ def train_filter(
     (eq. 13); it returns None to keep theta unchanged.
     """
     num_cells = transform.grid_size[0] * transform.grid_size[1]
-    g_f = np.zeros_like(xf)
-    h_f = np.zeros_like(xf)
+    g_f = h_f = np.zeros_like(xf)  # h and the multiplier start at 0; g is set first
     l_f = np.zeros_like(xf)
-    s_xx = np.sum((xf.real**2 + xf.imag**2), axis=0).astype(np.float32)
+    s_xx = np.empty(xf.shape[1:], np.float32)
+    admm_kernels.channel_energy(xf, s_xx)
     s_gx_prev = np.sum(np.conj(xf) * g_prev, axis=0)
     gamma = float(settings.gamma_init)
     theta = float(theta_start)
@@ -233,7 +274,7 @@ def train_filter(
             new_theta = theta_of_filter(g_f, iteration)
             if new_theta is not None:
                 theta = float(new_theta)
-        l_f += np.float32(gamma) * (g_f - h_f)  # eq. 14
+        admm_kernels.update_multiplier(l_f, g_f, h_f, np.float32(gamma))  # eq. 14
         gamma = min(settings.gamma_step * gamma, settings.gamma_max)
     return g_f, theta
 
