@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import sys
 from dataclasses import dataclass
+from functools import lru_cache
 
 import numpy as np
 import scipy.fft
@@ -48,10 +49,23 @@ def matlab_round(values: np.ndarray | float) -> np.ndarray:
     return np.sign(values) * np.floor(np.abs(values) + 0.5)
 
 
+@lru_cache(maxsize=16)
 def centred_frequencies(n: int) -> np.ndarray:
-    """Integer frequencies/offsets in FFT order: 0, 1, ..., ceil((n-1)/2), -floor((n-1)/2), ..., -1."""
+    """Integer frequencies/offsets in FFT order: 0, 1, ..., ceil((n-1)/2), -floor((n-1)/2), ..., -1.
+
+    Read-only and cached: every frame asks for the same few grid sizes.
+    """
     half = (n - 1) // 2
-    return np.roll(np.arange(-half, n - half), -half).astype(np.float64)
+    frequencies = np.roll(np.arange(-half, n - half), -half).astype(np.float64)
+    frequencies.flags.writeable = False
+    return frequencies
+
+
+@lru_cache(maxsize=16)
+def _squared_frequencies(n: int) -> np.ndarray:
+    squared = centred_frequencies(n) ** 2
+    squared.flags.writeable = False
+    return squared
 
 
 def gaussian_label(grid_size: tuple[int, int], sigma: float) -> np.ndarray:
@@ -305,6 +319,7 @@ def newton_peak(response: np.ndarray, iterations: int) -> tuple[float, float, fl
     init_x = 2.0 * np.pi * trans_col / cols
     ky = centred_frequencies(rows)
     kx = centred_frequencies(cols)
+    ky_sq, kx_sq = _squared_frequencies(rows), _squared_frequencies(cols)
     pos_y, pos_x = init_y, init_x
     exp_iky = np.exp(1j * ky * pos_y)
     exp_ikx = np.exp(1j * kx * pos_x)
@@ -314,8 +329,8 @@ def newton_peak(response: np.ndarray, iterations: int) -> tuple[float, float, fl
         grad_y = -np.imag((ky * exp_iky) @ resp_x)
         grad_x = -np.imag(y_resp @ (kx * exp_ikx))
         ival = 1j * (exp_iky @ resp_x)
-        h_yy = np.real(-((ky**2) * exp_iky) @ resp_x + ival)
-        h_xx = np.real(-y_resp @ ((kx**2) * exp_ikx) + ival)
+        h_yy = np.real(-(ky_sq * exp_iky) @ resp_x + ival)
+        h_xx = np.real(-y_resp @ (kx_sq * exp_ikx) + ival)
         h_xy = np.real(-((ky * exp_iky) @ (response_f @ (kx * exp_ikx))))
         det = h_yy * h_xx - h_xy * h_xy
         if det == 0.0 or not np.isfinite(det):
