@@ -10,6 +10,7 @@ described in docs/architecture.md.
 """
 
 from importlib import import_module
+from importlib.metadata import PackageNotFoundError, version
 
 from autotrack.compile_cache import configure_numba_cache
 from autotrack.errors import AutoTrackError, BoxError, InputError, SceneError, SessionError
@@ -38,26 +39,16 @@ configure_numba_cache()  # before numba is imported: compiled kernels need a wri
 
 
 def __getattr__(name: str):
-    if name == "__version__":
-        return _installed_version()
     module = _LAZY.get(name)
     if module is None:
         raise AttributeError(f"module 'autotrack' has no attribute {name!r}")
     return getattr(import_module(module), name)
 
 
-def _installed_version() -> str:
-    """The installed package's version, looked up on first use: importlib.metadata scans the
-    installed distributions (~0.1 s), which a tracking process does not need at start-up."""
-    from importlib.metadata import PackageNotFoundError, version
-
-    global __version__
-    try:
-        __version__ = version("autotrack-studio")
-    except PackageNotFoundError:  # running from a source tree that is not installed
-        __version__ = "0.0.0+unknown"
-    return __version__
-
+try:
+    __version__ = version("autotrack-studio")
+except PackageNotFoundError:  # running from a source tree that is not installed
+    __version__ = "0.0.0+unknown"
 
 __all__ = [
     "PRESETS",

@@ -20,6 +20,7 @@ from functools import lru_cache
 from pathlib import Path
 
 import numpy as np
+import scipy.linalg
 from numba import njit
 
 from autotrack.errors import InputError
@@ -356,8 +357,6 @@ def lab11_projection() -> np.ndarray:
     The 11 probabilities sum to one, so projecting onto this basis loses nothing:
     p = projection.T @ feature + 1/11.
     """
-    import scipy.linalg  # once per process (cached): kept off the import of the tracker
-
     basis = scipy.linalg.helmert(len(COLOUR_TERMS))
     basis.flags.writeable = False
     return basis
