@@ -148,7 +148,9 @@ class SpectrumTransform:
         """Real maps of half spectra, in a buffer the next `inverse_scratch` call overwrites."""
         return self._inverse(spectrum)
 
-    def project(self, g_f: np.ndarray, l_f: np.ndarray, gamma: float, gain: np.ndarray):
+    def project(
+        self, g_f: np.ndarray, l_f: np.ndarray, gamma: float, gain: np.ndarray
+    ) -> np.ndarray:
         """F(gain * F^-1(gamma (g + l))), the h-step (eq. 12), in the transforms' own buffers.
 
         Returns a buffer the next `project` call overwrites.
