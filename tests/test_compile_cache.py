@@ -70,3 +70,22 @@ def test_second_process_loads_the_cached_kernels(tmp_path):
     second = subprocess.run([sys.executable, "-c", script], env=env, capture_output=True, text=True)
     assert second.returncode == 0, second.stderr
     assert int(second.stdout.split()[-1]) >= 1  # loaded from the cache, not compiled
+
+
+def test_tracker_import_leaves_out_modules_tracking_does_not_need():
+    """A fresh process importing the tracker does not import dask (through pyFFTW's optional
+    dask interface) or scipy.io, and dask.array.fft still imports afterwards."""
+    pytest.importorskip("dask.array")
+    script = (
+        "import sys\n"
+        "import autotrack\n"
+        "from autotrack import AutoTrack\n"
+        "heavy = [m for m in ('dask', 'scipy.io') if m in sys.modules]\n"
+        "print(','.join(heavy))\n"
+        "import dask.array.fft\n"
+        "print(callable(dask.array.fft.fft_wrap))\n"
+    )
+    done = subprocess.run(
+        [sys.executable, "-c", script], capture_output=True, text=True, check=True
+    )
+    assert done.stdout.split("\n")[:2] == ["", "True"]

@@ -11,14 +11,36 @@ FFT runs over contiguous memory.
 
 from __future__ import annotations
 
+import sys
 from dataclasses import dataclass
+from functools import lru_cache
 
 import numpy as np
-import pyfftw
 import scipy.fft
 from numba import njit
 
+from autotrack.tracker import admm_kernels
+
 _FFT_AXES = (-2, -1)
+
+
+def _import_pyfftw():
+    """pyFFTW without its dask interface: when dask is installed, `import pyfftw` imports
+    dask.array (~0.4 s of a fresh process's start-up) for `pyfftw.interfaces.dask_fft`, which
+    the tracker never uses. A None entry in sys.modules makes that optional import fail fast."""
+    blocked = "dask.array.fft" not in sys.modules
+    if blocked:
+        sys.modules["dask.array.fft"] = None
+    try:
+        import pyfftw
+        import pyfftw.builders
+    finally:
+        if blocked:
+            del sys.modules["dask.array.fft"]
+    return pyfftw
+
+
+pyfftw = _import_pyfftw()
 
 
 def matlab_round(values: np.ndarray | float) -> np.ndarray:
@@ -27,10 +49,23 @@ def matlab_round(values: np.ndarray | float) -> np.ndarray:
     return np.sign(values) * np.floor(np.abs(values) + 0.5)
 
 
+@lru_cache(maxsize=16)
 def centred_frequencies(n: int) -> np.ndarray:
-    """Integer frequencies/offsets in FFT order: 0, 1, ..., ceil((n-1)/2), -floor((n-1)/2), ..., -1."""
+    """Integer frequencies/offsets in FFT order: 0, 1, ..., ceil((n-1)/2), -floor((n-1)/2), ..., -1.
+
+    Read-only and cached: every frame asks for the same few grid sizes.
+    """
     half = (n - 1) // 2
-    return np.roll(np.arange(-half, n - half), -half).astype(np.float64)
+    frequencies = np.roll(np.arange(-half, n - half), -half).astype(np.float64)
+    frequencies.flags.writeable = False
+    return frequencies
+
+
+@lru_cache(maxsize=16)
+def _squared_frequencies(n: int) -> np.ndarray:
+    squared = centred_frequencies(n) ** 2
+    squared.flags.writeable = False
+    return squared
 
 
 def gaussian_label(grid_size: tuple[int, int], sigma: float) -> np.ndarray:
@@ -87,15 +122,43 @@ class SpectrumTransform:
             planner_effort="FFTW_ESTIMATE",
         )
         self._spectrum_shape = (channels, rows, cols // 2 + 1)
+        # The h-step's own forward plan on its own buffers (the same estimated plan as
+        # `_forward`, so the same rounding): its input is written in place by a kernel, and
+        # `forward` re-targeting `_forward`'s output array cannot touch a live h spectrum.
+        self._h_forward = pyfftw.builders.rfft2(
+            np.empty((channels, rows, cols), np.float32),
+            axes=_FFT_AXES,
+            threads=1,
+            planner_effort="FFTW_ESTIMATE",
+        )
 
     def forward(self, maps: np.ndarray) -> np.ndarray:
         """Half spectra of real maps (a new complex64 array)."""
         out = pyfftw.empty_aligned(self._spectrum_shape, np.complex64)
         return self._forward(maps, out)
 
+    def forward_windowed(self, features: np.ndarray, window: np.ndarray) -> np.ndarray:
+        """Half spectra of (rows, cols, channels) feature maps times a (rows, cols) window (a new
+        complex64 array); the product is written straight into the transform's input buffer."""
+        maps = self._forward.input_array
+        np.multiply(features.transpose(2, 0, 1), window, out=maps)
+        return self.forward(maps)
+
     def inverse_scratch(self, spectrum: np.ndarray) -> np.ndarray:
         """Real maps of half spectra, in a buffer the next `inverse_scratch` call overwrites."""
         return self._inverse(spectrum)
+
+    def project(
+        self, g_f: np.ndarray, l_f: np.ndarray, gamma: float, gain: np.ndarray
+    ) -> np.ndarray:
+        """F(gain * F^-1(gamma (g + l))), the h-step (eq. 12), in the transforms' own buffers.
+
+        Returns a buffer the next `project` call overwrites.
+        """
+        admm_kernels.scaled_sum(g_f, l_f, np.float32(gamma), self._inverse.input_array)
+        maps = self._inverse()  # on its own buffers; the call (not execute) scales by 1 / N
+        admm_kernels.apply_gain(maps, gain, self._h_forward.input_array)
+        return self._h_forward()
 
 
 def half_spectrum_weights(grid_size: tuple[int, int]) -> np.ndarray:
@@ -121,42 +184,72 @@ class AdmmSettings:
 
 @njit(cache=True, nogil=True, fastmath=False)
 def _g_step_kernel(xf, yf, h_f, l_f, g_prev, s_xx, s_gx_prev, gamma, theta, num_cells, g_out):
-    # Loops run channel-outermost so every array is read contiguously.
+    # Loops run channel-outermost so every array is read contiguously. Complex products are
+    # spelt out on real and imaginary parts in numba's own order (re = ac - bd, im = ad + bc);
+    # a real factor multiplies both parts directly and the division is by a real number, which
+    # gives the same values as the complex arithmetic with a zero imaginary part at half the
+    # work.
     channels, rows, cols = xf.shape
     scale = np.float32(1.0 / (gamma + theta))
     t_scale = np.float32(scale / num_cells)
     gamma_scale = np.float32(gamma * scale)
     theta_scale = np.float32(theta * scale)
     cells_penalty = np.float32(num_cells * (gamma + theta))
-    s_hx = np.zeros((rows, cols), np.complex64)
-    s_lx = np.zeros((rows, cols), np.complex64)
+    s_hx_re = np.zeros((rows, cols), np.float32)
+    s_hx_im = np.zeros((rows, cols), np.float32)
+    s_lx_re = np.zeros((rows, cols), np.float32)
+    s_lx_im = np.zeros((rows, cols), np.float32)
     for k in range(channels):
         for r in range(rows):
             for c in range(cols):
-                x_conj = np.conj(xf[k, r, c])
-                s_hx[r, c] += x_conj * h_f[k, r, c]
-                s_lx[r, c] += x_conj * l_f[k, r, c]
+                x, h, m = xf[k, r, c], h_f[k, r, c], l_f[k, r, c]
+                # conj(x) h and conj(x) l
+                s_hx_re[r, c] += x.real * h.real + x.imag * h.imag
+                s_hx_im[r, c] += x.real * h.imag - x.imag * h.real
+                s_lx_re[r, c] += x.real * m.real + x.imag * m.imag
+                s_lx_im[r, c] += x.real * m.imag - x.imag * m.real
     # x^H rho / ((gamma + theta) B), with B = x^H x + T (gamma + theta)
-    projection = np.empty((rows, cols), np.complex64)
+    proj_re = np.empty((rows, cols), np.float32)
+    proj_im = np.empty((rows, cols), np.float32)
     for r in range(rows):
         for c in range(cols):
-            projection[r, c] = (
-                t_scale * s_xx[r, c] * yf[r, c]
-                + theta_scale * s_gx_prev[r, c]
-                - scale * s_lx[r, c]
-                + gamma_scale * s_hx[r, c]
-            ) / (s_xx[r, c] + cells_penalty)
+            label_gain = t_scale * s_xx[r, c]
+            y, gx = yf[r, c], s_gx_prev[r, c]
+            denominator = s_xx[r, c] + cells_penalty
+            proj_re[r, c] = (
+                label_gain * y.real
+                + theta_scale * gx.real
+                - scale * s_lx_re[r, c]
+                + gamma_scale * s_hx_re[r, c]
+            ) / denominator
+            proj_im[r, c] = (
+                label_gain * y.imag
+                + theta_scale * gx.imag
+                - scale * s_lx_im[r, c]
+                + gamma_scale * s_hx_im[r, c]
+            ) / denominator
     for k in range(channels):
         for r in range(rows):
             for c in range(cols):
-                x = xf[k, r, c]
-                g_out[k, r, c] = (
-                    t_scale * yf[r, c] * x
-                    - scale * l_f[k, r, c]
-                    + gamma_scale * h_f[k, r, c]
-                    + theta_scale * g_prev[k, r, c]
-                    - x * projection[r, c]
+                x, m, h, p = xf[k, r, c], l_f[k, r, c], h_f[k, r, c], g_prev[k, r, c]
+                y_re = t_scale * yf[r, c].real
+                y_im = t_scale * yf[r, c].imag
+                pr, pi = proj_re[r, c], proj_im[r, c]
+                g_re = (
+                    (y_re * x.real - y_im * x.imag)
+                    - scale * m.real
+                    + gamma_scale * h.real
+                    + theta_scale * p.real
+                    - (x.real * pr - x.imag * pi)
                 )
+                g_im = (
+                    (y_re * x.imag + y_im * x.real)
+                    - scale * m.imag
+                    + gamma_scale * h.imag
+                    + theta_scale * p.imag
+                    - (x.real * pi + x.imag * pr)
+                )
+                g_out[k, r, c] = complex(g_re, g_im)
 
 
 def solve_g_step(
@@ -193,12 +286,13 @@ def solve_h_step(
     lambda_spatial: float,
     transform: SpectrumTransform,
 ) -> np.ndarray:
-    """Closed form of the h-subproblem in the spatial domain, returned as a half spectrum (eq. 12)."""
+    """Closed form of the h-subproblem in the spatial domain, returned as a half spectrum (eq. 12).
+
+    The result lives in `transform`'s buffer, overwritten by the next h-step.
+    """
     num_cells = transform.grid_size[0] * transform.grid_size[1]
     gain = (num_cells / (lambda_spatial * spatial_window**2 + gamma * num_cells)).astype(np.float32)
-    h = transform.inverse_scratch(np.float32(gamma) * (g_f + l_f))
-    h *= gain
-    return transform.forward(h)
+    return transform.project(g_f, l_f, gamma, gain)
 
 
 def train_filter(
@@ -217,10 +311,10 @@ def train_filter(
     (eq. 13); it returns None to keep theta unchanged.
     """
     num_cells = transform.grid_size[0] * transform.grid_size[1]
-    g_f = np.zeros_like(xf)
-    h_f = np.zeros_like(xf)
+    g_f = h_f = np.zeros_like(xf)  # h and the multiplier start at 0; g is set first
     l_f = np.zeros_like(xf)
-    s_xx = np.sum((xf.real**2 + xf.imag**2), axis=0).astype(np.float32)
+    s_xx = np.empty(xf.shape[1:], np.float32)
+    admm_kernels.channel_energy(xf, s_xx)
     s_gx_prev = np.sum(np.conj(xf) * g_prev, axis=0)
     gamma = float(settings.gamma_init)
     theta = float(theta_start)
@@ -233,7 +327,7 @@ def train_filter(
             new_theta = theta_of_filter(g_f, iteration)
             if new_theta is not None:
                 theta = float(new_theta)
-        l_f += np.float32(gamma) * (g_f - h_f)  # eq. 14
+        admm_kernels.update_multiplier(l_f, g_f, h_f, np.float32(gamma))  # eq. 14
         gamma = min(settings.gamma_step * gamma, settings.gamma_max)
     return g_f, theta
 
@@ -264,6 +358,7 @@ def newton_peak(response: np.ndarray, iterations: int) -> tuple[float, float, fl
     init_x = 2.0 * np.pi * trans_col / cols
     ky = centred_frequencies(rows)
     kx = centred_frequencies(cols)
+    ky_sq, kx_sq = _squared_frequencies(rows), _squared_frequencies(cols)
     pos_y, pos_x = init_y, init_x
     exp_iky = np.exp(1j * ky * pos_y)
     exp_ikx = np.exp(1j * kx * pos_x)
@@ -273,8 +368,8 @@ def newton_peak(response: np.ndarray, iterations: int) -> tuple[float, float, fl
         grad_y = -np.imag((ky * exp_iky) @ resp_x)
         grad_x = -np.imag(y_resp @ (kx * exp_ikx))
         ival = 1j * (exp_iky @ resp_x)
-        h_yy = np.real(-((ky**2) * exp_iky) @ resp_x + ival)
-        h_xx = np.real(-y_resp @ ((kx**2) * exp_ikx) + ival)
+        h_yy = np.real(-(ky_sq * exp_iky) @ resp_x + ival)
+        h_xx = np.real(-y_resp @ (kx_sq * exp_ikx) + ival)
         h_xy = np.real(-((ky * exp_iky) @ (response_f @ (kx * exp_ikx))))
         det = h_yy * h_xx - h_xy * h_xy
         if det == 0.0 or not np.isfinite(det):

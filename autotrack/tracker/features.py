@@ -20,7 +20,6 @@ from functools import lru_cache
 from pathlib import Path
 
 import numpy as np
-import scipy.io
 import scipy.linalg
 from numba import njit
 
@@ -268,6 +267,8 @@ def load_colour_table(path: str | Path) -> np.ndarray:
 
 
 def _table_from_mat(file: Path) -> np.ndarray:
+    import scipy.io  # only for .mat tables: kept off a tracking process's start-up
+
     try:
         contents = scipy.io.loadmat(file)
     except (OSError, ValueError, NotImplementedError) as error:

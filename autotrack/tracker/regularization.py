@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable
 
 import numpy as np
@@ -51,17 +52,35 @@ def local_variation(
     coincide; Pi = |R_t - R_{t-1}| / |R_{t-1}| elementwise. Division by a near-zero response
     gives inf/NaN entries, which the caller must treat (they make the frame aberrant).
     """
-    shift = (-int(np.floor(displacement[0])), -int(np.floor(displacement[1])))
-    previous_shift = (
-        -int(np.floor(previous_displacement[0])),
-        -int(np.floor(previous_displacement[1])),
+    aligned, previous_aligned = centred_alignment(
+        response, displacement, previous_response, previous_displacement
     )
-    aligned = np.roll(response, shift, axis=(0, 1))
-    previous_aligned = np.roll(previous_response, previous_shift, axis=(0, 1))
     with np.errstate(divide="ignore", invalid="ignore"):
         variation = np.abs(aligned - previous_aligned) / np.abs(previous_aligned)
-    rows, cols = variation.shape
-    return np.roll(variation, (rows // 2, cols // 2), axis=(0, 1)).astype(np.float32)
+    return variation.astype(np.float32, copy=False)
+
+
+def centred_alignment(
+    response: np.ndarray,
+    displacement: tuple[float, float],
+    previous_response: np.ndarray,
+    previous_displacement: tuple[float, float],
+) -> tuple[np.ndarray, np.ndarray]:
+    """Both maps circularly shifted by minus their floored peak and then by half the map, so the
+    peaks meet at the centre: one roll per map instead of aligning first and centring the
+    variation after (element-wise maths commutes with the shift, so Pi is the same bit for bit).
+    """
+    rows, cols = response.shape
+    centre = (rows // 2, cols // 2)
+    shift = (centre[0] - math.floor(displacement[0]), centre[1] - math.floor(displacement[1]))
+    previous_shift = (
+        centre[0] - math.floor(previous_displacement[0]),
+        centre[1] - math.floor(previous_displacement[1]),
+    )
+    return (
+        np.roll(response, shift, axis=(0, 1)),
+        np.roll(previous_response, previous_shift, axis=(0, 1)),
+    )
 
 
 def global_variation(variation: np.ndarray) -> float:

@@ -19,6 +19,8 @@ import math
 
 import numpy as np
 
+from autotrack.tracker import regularization
+
 
 def robust_local_variation(
     response: np.ndarray,
@@ -35,17 +37,15 @@ def robust_local_variation(
     response was weaker than `floor` of it, and Pi <= (|R_t| + |R_t-1|) / f stays bounded.
     Maps are aligned on their integer peaks and the result is centred as in eq. 2.
     """
-    shift = (-math.floor(displacement[0]), -math.floor(displacement[1]))
-    previous_shift = (-math.floor(previous_displacement[0]), -math.floor(previous_displacement[1]))
-    aligned = np.roll(response, shift, axis=(0, 1))
-    previous_aligned = np.roll(previous_response, previous_shift, axis=(0, 1))
+    aligned, previous_aligned = regularization.centred_alignment(
+        response, displacement, previous_response, previous_displacement
+    )
     magnitude = np.abs(previous_aligned)
     denominator = np.maximum(
         magnitude, floor * float(np.max(magnitude)) + np.finfo(np.float32).tiny
     )
     variation = np.abs(aligned - previous_aligned) / denominator
-    rows, cols = variation.shape
-    return np.roll(variation, (rows // 2, cols // 2), axis=(0, 1)).astype(np.float32)
+    return variation.astype(np.float32, copy=False)
 
 
 def acting_spatial_window(

@@ -323,9 +323,7 @@ class AutoTrack:
             (int(self.window_size[0]), int(self.window_size[1])),
         )
         features = extract_features(patch, self.params, self.colour_table)
-        windowed = np.empty((features.shape[2], *self.grid_size), dtype=np.float32)
-        np.multiply(features.transpose(2, 0, 1), self.cos_window, out=windowed)
-        return self.transform.forward(windowed)
+        return self.transform.forward_windowed(features, self.cos_window)
 
     def _theta_update(
         self, theta_ref: float, filter_prev: np.ndarray

@@ -1,0 +1,67 @@
+"""Compiled element-wise steps of the ADMM loop (dcf.train_filter), bit for bit numpy's.
+
+Each kernel fuses what numpy computed as several whole-array operations with temporaries into
+one pass, following numpy's operation order and precision exactly: float32 / complex64
+arithmetic, one rounding per numpy operation, products of complex numbers only by real scalars
+(numpy multiplies two complex64 arrays with fused multiply-adds where the CPU has them, which
+a kernel could not follow on every machine), sums over the channel axis taken channel after
+channel (as numpy's reduction over the first axis of a C-contiguous array does), and no
+fastmath (no contraction into fused multiply-adds, no reassociation). tests/test_admm_kernels.py
+compares every kernel with the numpy expression it replaces on features of real sequences.
+
+Arrays are (channels, rows, half columns) complex64 spectra or (channels, rows, cols) float32
+maps, C-contiguous.
+"""
+
+from __future__ import annotations
+
+from numba import njit
+
+
+@njit(cache=True, nogil=True, fastmath=False)
+def channel_energy(xf, out):
+    """out = sum_k |x_k|^2 per frequency (float32); numpy: np.sum(xf.real**2 + xf.imag**2, axis=0)."""
+    channels, rows, cols = xf.shape
+    for r in range(rows):
+        for c in range(cols):
+            x = xf[0, r, c]
+            out[r, c] = x.real * x.real + x.imag * x.imag
+    for k in range(1, channels):
+        for r in range(rows):
+            for c in range(cols):
+                x = xf[k, r, c]
+                out[r, c] += x.real * x.real + x.imag * x.imag
+
+
+@njit(cache=True, nogil=True, fastmath=False)
+def scaled_sum(g_f, l_f, gamma, out):
+    """out = gamma (g + l), the h-step's right-hand side (eq. 12); numpy:
+    np.float32(gamma) * (g_f + l_f)."""
+    channels, rows, cols = g_f.shape
+    for k in range(channels):
+        for r in range(rows):
+            for c in range(cols):
+                total = g_f[k, r, c] + l_f[k, r, c]
+                out[k, r, c] = complex(gamma * total.real, gamma * total.imag)
+
+
+@njit(cache=True, nogil=True, fastmath=False)
+def apply_gain(maps, gain, out):
+    """out = maps * gain[None]: the h-step's per-cell gain (eq. 12); numpy: h *= gain."""
+    channels, rows, cols = maps.shape
+    for k in range(channels):
+        for r in range(rows):
+            for c in range(cols):
+                out[k, r, c] = maps[k, r, c] * gain[r, c]
+
+
+@njit(cache=True, nogil=True, fastmath=False)
+def update_multiplier(l_f, g_f, h_f, gamma):
+    """In place l += gamma (g - h), the multiplier update (eq. 14); numpy:
+    l_f += np.float32(gamma) * (g_f - h_f)."""
+    channels, rows, cols = l_f.shape
+    for k in range(channels):
+        for r in range(rows):
+            for c in range(cols):
+                step = g_f[k, r, c] - h_f[k, r, c]
+                l_f[k, r, c] += complex(gamma * step.real, gamma * step.imag)

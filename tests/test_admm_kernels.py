@@ -1,0 +1,127 @@
+"""The compiled ADMM steps give numpy's results bit for bit on features of real sequences."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from numba import njit
+
+from autotrack import AutoTrack, preset
+from autotrack.evaluation.datasets import load_otb_sequence
+from autotrack.io.frames import read_image
+from autotrack.tracker import admm_kernels, dcf
+from tests.conftest import COLOUR_TABLE, needs_colour_table, shared_sequence_dir
+
+
+def _training_inputs(monkeypatch, dataset: str, name: str, frames: int = 6):
+    """(xf, filter before the frame, spatial window, transform) of every training of a run."""
+    sequence = load_otb_sequence(shared_sequence_dir(dataset, name))[0]
+    captured = []
+    original = dcf.train_filter
+
+    def recording(xf, yf, g_prev, spatial_window, *args, **kwargs):
+        transform = args[2]
+        captured.append((xf.copy(), g_prev.copy(), np.array(spatial_window), transform))
+        return original(xf, yf, g_prev, spatial_window, *args, **kwargs)
+
+    monkeypatch.setattr(dcf, "train_filter", recording)
+    tracker = AutoTrack(preset("autotrack", str(COLOUR_TABLE)))
+    tracker.init(read_image(sequence.frame_paths[0]), sequence.init_box)
+    for path in sequence.frame_paths[1:frames]:
+        tracker.update(read_image(path))
+    return captured[1:]  # the first training starts from a zero filter
+
+
+SEQUENCES = [("DTB70", "Surfing06"), ("UAV123_10fps", "boat5"), ("OTB", "Crossing")]
+
+
+@needs_colour_table
+@pytest.mark.parametrize(("dataset", "name"), SEQUENCES)
+def test_admm_kernels_equal_numpy_bit_for_bit(monkeypatch, dataset, name):
+    for xf, g_prev, _, _ in _training_inputs(monkeypatch, dataset, name):
+        energy = np.empty(xf.shape[1:], np.float32)
+        admm_kernels.channel_energy(xf, energy)
+        np.testing.assert_array_equal(energy, np.sum(xf.real**2 + xf.imag**2, axis=0))
+
+        multiplier = (xf - g_prev) * np.float32(0.37)
+        for gamma in (1.0, 10.0, 0.7312):
+            expected = np.float32(gamma) * (g_prev + multiplier)
+            got = np.empty_like(expected)
+            admm_kernels.scaled_sum(g_prev, multiplier, np.float32(gamma), got)
+            np.testing.assert_array_equal(got, expected)
+
+            expected = multiplier.copy()
+            expected += np.float32(gamma) * (g_prev - xf)
+            got = multiplier.copy()
+            admm_kernels.update_multiplier(got, g_prev, xf, np.float32(gamma))
+            np.testing.assert_array_equal(got, expected)
+
+
+@needs_colour_table
+@pytest.mark.parametrize(("dataset", "name"), SEQUENCES[:2])
+def test_h_step_equals_the_numpy_h_step_bit_for_bit(monkeypatch, dataset, name):
+    """Kernels + FFTW on its own buffers = inverse, numpy gain, forward as numpy computed it."""
+    for xf, g_prev, window, transform in _training_inputs(monkeypatch, dataset, name):
+        cells = transform.grid_size[0] * transform.grid_size[1]
+        multiplier = (xf - g_prev) * np.float32(0.37)
+        for gamma in (1.0, 10.0):
+            gain = (cells / (0.1 * window**2 + gamma * cells)).astype(np.float32)
+            maps = transform.inverse_scratch(np.float32(gamma) * (g_prev + multiplier))
+            maps *= gain
+            expected = transform.forward(maps)
+            got = dcf.solve_h_step(g_prev, multiplier, window, gamma, 0.1, transform)
+            np.testing.assert_array_equal(got, expected)
+
+
+@njit(cache=False, fastmath=False)
+def _g_step_in_complex_arithmetic(xf, yf, h_f, l_f, g_prev, s_xx, s_gx, gamma, theta, cells, out):
+    """The g-step (eqs. 10-11) as it was written before, in numba's complex arithmetic."""
+    channels, rows, cols = xf.shape
+    scale = np.float32(1.0 / (gamma + theta))
+    t_scale = np.float32(scale / cells)
+    gamma_scale = np.float32(gamma * scale)
+    theta_scale = np.float32(theta * scale)
+    cells_penalty = np.float32(cells * (gamma + theta))
+    s_hx = np.zeros((rows, cols), np.complex64)
+    s_lx = np.zeros((rows, cols), np.complex64)
+    for k in range(channels):
+        for r in range(rows):
+            for c in range(cols):
+                s_hx[r, c] += np.conj(xf[k, r, c]) * h_f[k, r, c]
+                s_lx[r, c] += np.conj(xf[k, r, c]) * l_f[k, r, c]
+    projection = np.empty((rows, cols), np.complex64)
+    for r in range(rows):
+        for c in range(cols):
+            projection[r, c] = (
+                t_scale * s_xx[r, c] * yf[r, c]
+                + theta_scale * s_gx[r, c]
+                - scale * s_lx[r, c]
+                + gamma_scale * s_hx[r, c]
+            ) / (s_xx[r, c] + cells_penalty)
+    for k in range(channels):
+        for r in range(rows):
+            for c in range(cols):
+                x = xf[k, r, c]
+                out[k, r, c] = (
+                    t_scale * yf[r, c] * x
+                    - scale * l_f[k, r, c]
+                    + gamma_scale * h_f[k, r, c]
+                    + theta_scale * g_prev[k, r, c]
+                    - x * projection[r, c]
+                )
+
+
+@needs_colour_table
+@pytest.mark.parametrize(("dataset", "name"), SEQUENCES[:2])
+def test_g_step_kernel_equals_complex_arithmetic_bit_for_bit(monkeypatch, dataset, name):
+    for xf, g_prev, _, transform in _training_inputs(monkeypatch, dataset, name):
+        yf = xf[0] * np.complex64(0.5 - 0.25j)
+        h_f, l_f = (xf + g_prev) * np.float32(0.5), (xf - g_prev) * np.float32(0.37)
+        s_xx = np.sum(xf.real**2 + xf.imag**2, axis=0)
+        s_gx = np.sum(np.conj(xf) * g_prev, axis=0)
+        cells = transform.grid_size[0] * transform.grid_size[1]
+        for gamma, theta in ((1.0, 0.0), (10.0, 12.5), (0.7312, 3.0)):
+            expected = np.empty_like(xf)
+            args = (xf, yf, h_f, l_f, g_prev, s_xx, s_gx, gamma, theta, cells)
+            _g_step_in_complex_arithmetic(*args, expected)
+            np.testing.assert_array_equal(dcf.solve_g_step(*args), expected)
