@@ -87,6 +87,12 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
         default=4,
         help="most targets a tab may have at once (default 4: the demo scene's landmarks)",
     )
+    parser.add_argument(
+        "--allow-live",
+        action="store_true",
+        help="let browser users open live sources: a camera index, an rtsp:// or http(s):// "
+        "stream, or a video under the allowed folders played in real time (off by default)",
+    )
     parser.set_defaults(func=run)
 
 
@@ -175,6 +181,7 @@ def run(args: argparse.Namespace) -> int:
         tracker_preset=args.preset,
         canvas_fps=args.canvas_fps,
         max_targets=args.max_targets,
+        allow_live=args.allow_live,
     )
     if args.no_token:
         config = replace(config, token=None)

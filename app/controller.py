@@ -33,13 +33,11 @@ from autotrack.localization.scene import Scene, load_scene
 from autotrack.params import PRESETS, preset
 from autotrack.pipeline import Pipeline, Recording, TrackedTarget
 from autotrack.sessions import open_session
-from autotrack.sessions.snapshot import finished_copy
+from autotrack.sessions.frames import EmbeddedFrames
 
-EXPORTS = ("tracks", "poses", "mcap")
 POSE_OPTIONS = {"refine_params": RefineParams(), "reacquire_params": ReacquireParams()}
 """With a scene, the pipeline gives the solver sub-pixel landmark points and re-acquires lost
 landmarks, as `autotrack localize` does."""
-"""What `export` can build: the tracks zip, the TUM poses, the session file itself."""
 
 
 class TabController:
@@ -187,7 +185,7 @@ class TabController:
         except Exception:
             frames.close()
             raise
-        self._start(run, path, scene_path)
+        self.install_run(run, path, scene_path)
 
     def _load(
         self, path: Path, scene_path: Path | None, *, scene_given: bool
@@ -211,7 +209,7 @@ class TabController:
             source=str(path), directory=self.config.sessions_dir, scene_path=scene_path
         )
 
-    def _start(self, run: Pipeline, path: Path, scene_path: Path | None) -> None:
+    def install_run(self, run: Pipeline, path: Path, scene_path: Path | None) -> None:
         """Make `run` (on the sequence `path`) this tab's run, replacing the current one."""
         self.close_run()
         self.run = run
@@ -244,7 +242,7 @@ class TabController:
         self.run = None
         self.recording_path = None
 
-    def _claim_recording(self) -> None:
+    def claim_recording(self) -> None:
         """Register the run's session file (created at the first edit) as this tab's."""
         path = None if self.run is None else self.run.session_path
         if path is not None and path != self.recording_path:
@@ -278,7 +276,7 @@ class TabController:
             self.message = (
                 f"{target_id} {verb}{why} at frame {self.cursor + 1}; it re-tracks from here."
             )
-        self._claim_recording()
+        self.claim_recording()
 
     def _search_landmarks(self) -> None:
         """Tie the targets on this frame to landmarks (see LandmarkTies.search) and say how."""
@@ -306,7 +304,7 @@ class TabController:
             f"{self.truth_target} started from the ground truth at frame {self.cursor + 1}; "
             "play to score it (Debugging → Ground truth)."
         )
-        self._claim_recording()
+        self.claim_recording()
 
     def scored_target(self) -> TrackedTarget | None:
         """The target scored against the ground truth: the one started from it, else T1."""
@@ -354,7 +352,7 @@ class TabController:
         self.cursor = 0
         run.add_targets(0, boxes)
         self.message = f"Loaded {len(boxes)} boxes from boxes.json on frame 1."
-        self._claim_recording()
+        self.claim_recording()
 
     # -- playback -----------------------------------------------------------------------------
 
@@ -434,6 +432,8 @@ class TabController:
         if self.recordings.writer_of(path) is not None:
             raise InputError(f"{path.name} is being recorded by another tab; reopen it later")
         session = open_session(path)
+        if session.image_count:  # a live run's recording: its own frames, to look through
+            return self.review_session(path)
         source = resolve_user_path(session.source, self.roots)
         scene_path = (
             resolve_user_path(session.scene_path, self.roots) if session.scene_path else None
@@ -451,30 +451,34 @@ class TabController:
         except Exception:
             frames.close()
             raise
-        self._start(run, source, scene_path)
+        self.install_run(run, source, scene_path)
         self.cursor = run.resume_frame
-        self._claim_recording()
+        self.claim_recording()
         note = " (the file was cut short)" if session.truncated else ""
         self.message = (
             f"Reopened {path.name}{note}: {len(run.targets)} targets, continuing from frame "
             f"{self.cursor + 1}; recording to a new session file."
         )
 
+    def review_session(self, path: Path) -> None:
+        """Open a session that embeds its frames (a live run's recording) to look through, on
+        those frames and with no new recording: its source cannot be replayed past them."""
+        session = open_session(path)
+        scene_path = session.scene_path and resolve_user_path(session.scene_path, self.roots)
+        scene = load_scene(scene_path) if scene_path else None
+        threads = self.config.tracker_threads
+        frames = EmbeddedFrames(session)
+        run = Pipeline.resume(session, frames, scene=scene, tracker_threads=threads, **POSE_OPTIONS)
+        self.install_run(run, path, scene_path or None)
+        self.cursor = run.resume_frame
+        self.message = (
+            f"Reopened {path.name}: {len(frames.recorded_indices)} frames recorded live (the "
+            f"dropped frames show the frame before them)."
+        )
+
     def export(self, what: str) -> tuple[str, bytes]:
-        """(file name, content) of a download: 'tracks', 'poses' or 'mcap' (see EXPORTS)."""
-        run = self.require_run()
-        path = run.session_path
-        if path is None:
-            raise InputError("nothing recorded yet: draw a box and track first")
-        run.flush()
-        if what == "tracks":
-            name, content = f"{path.stem}_tracks.zip", exports.tracks_zip(path)
-        elif what == "poses":
-            name, content = f"{path.stem}_poses.tum", exports.poses_tum(path)
-        elif what == "mcap":
-            name, content = path.name, finished_copy(path)  # a finished snapshot
-        else:
-            raise InputError(f"unknown export {what!r}; choose one of {EXPORTS}")
+        """(file name, content) of a download: 'tracks', 'poses' or 'mcap' (app.exports)."""
+        name, content = exports.build(self.require_run(), what)
         self.message = f"Sent {name} ({len(content) / 1024:.0f} kB)."
         return name, content
 
