@@ -42,14 +42,16 @@ OFF, PREVIEW, FROZEN, TRACKING = "off", "preview", "frozen", "tracking"
 
 @dataclass(frozen=True)
 class LiveFigures:
-    """What a live run did since tracking started (the frozen frame)."""
+    """What a live run did since Start (the frames dropped while the boxes were drawn on the
+    frozen frame are not counted)."""
 
     captured: int
     """Frames the source delivered after the frozen one."""
     processed: int
     """Of those, frames tracked."""
     dropped: int
-    """Of those, frames the tracker had no time for (never tracked)."""
+    """Of those, frames replaced by a newer one before the tracker was free (never tracked);
+    the rest are tracked or, the newest, still to be."""
     capture_fps: float
     """Frames per second the source delivered."""
     processed_fps: float
@@ -60,7 +62,7 @@ class LiveFigures:
     def text(self) -> str:
         """The status line's live part."""
         return (
-            f"🔴 live: capture {self.capture_fps:.1f} fps · processed {self.processed_fps:.1f} "
+            f"● live: capture {self.capture_fps:.1f} fps · processed {self.processed_fps:.1f} "
             f"fps · {self.processed} tracked, {self.dropped} dropped of {self.captured} · "
             f"latency {self.latency_ms:.0f} ms"
         )
@@ -84,6 +86,8 @@ class LiveControl:
         self.run: Pipeline | None = None
         """The live run (the controller's run from Freeze until Stop)."""
         self._outcomes: Iterator[tuple[CapturedFrame, FrameOutcome]] | None = None
+        self.started = (-1, 0.0)
+        """At Start: the last frame the source had delivered, the reader's clock (s)."""
         self._last_result: float | None = None
 
     @property
@@ -186,6 +190,7 @@ class LiveControl:
         controller.selected = None
         self.log = LiveLog(self._reader())
         self.log.adopt(self.newest)
+        self.started = (self._reader().captured - 1, self._reader().now())
         self._outcomes = follow_live(self.log, run, self.frames)
         self._last_result = None
         self.state = TRACKING
@@ -241,27 +246,28 @@ class LiveControl:
         return None
 
     def _say_recorded(self, path: Path | None, figures: LiveFigures | None, what: str) -> None:
-        figures_text = "" if figures is None else f" ({figures.text().removeprefix('🔴 ')})"
+        figures_text = "" if figures is None else f" ({figures.text().removeprefix('● ')})"
         where = (
             f"; recorded to {path.name}, reopened to look through" if path else "; nothing recorded"
         )
         self.controller.message = f"{what}{figures_text}{where}."
 
     def figures(self) -> LiveFigures | None:
-        """The live figures since tracking started (None before)."""
-        if self.log is None or self.reader is None or self.newest is None:
+        """The live figures since Start (None before)."""
+        if self.log is None or self.reader is None:
             return None
-        start = self.newest.index
-        processed = [frame for frame in self.log.processed if frame.index > start]
-        captured = max(0, self.reader.captured - 1 - start)
-        elapsed = self.reader.now() - self.newest.capture_time
+        start_index, start_time = self.started
+        processed = [frame for frame in self.log.processed if frame.index > start_index]
+        captured = max(0, self.reader.captured - 1 - start_index)
+        dropped = sum(1 for index in list(self.reader.dropped) if index > start_index)
+        elapsed = self.reader.now() - start_time
         recent = processed[-LATENCY_WINDOW:]
         span = recent[-1].capture_time - recent[0].capture_time if len(recent) > 1 else 0.0
         latency = float(np.median([f.latency for f in recent])) * 1e3 if recent else float("nan")
         return LiveFigures(
             captured=captured,
             processed=len(processed),
-            dropped=captured - len(processed),
+            dropped=dropped,
             capture_fps=captured / elapsed if elapsed > 0 else float("nan"),
             processed_fps=(len(recent) - 1) / span if span > 0 else float("nan"),
             latency_ms=latency,

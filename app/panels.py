@@ -376,8 +376,12 @@ def show_opened(panels: Panels, controller: TabController) -> None:
 
 
 def show_frame(panels: Panels, controller: TabController) -> None:
-    """The frame slider at the current frame (1-based)."""
-    panels.quiet.set(panels.playback.frame, "value", controller.cursor + 1)
+    """The frame slider at the current frame (1-based), its end moved on as a live source
+    grows."""
+    slider = panels.playback.frame
+    if controller.cursor + 1 > slider.max:
+        panels.quiet.set(slider, "max", controller.cursor + 1)
+    panels.quiet.set(slider, "value", controller.cursor + 1)
 
 
 def show_playing(panels: Panels, playing: bool) -> None:

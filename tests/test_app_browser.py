@@ -430,10 +430,19 @@ def test_a_live_source_is_tracked_in_chromium(live_studio, tmp_path: Path) -> No
                 tab=tab,
             )
             _wait_for(
-                lambda: "🔴 live: capture" in page.inner_text("body"),
+                lambda: "● live: capture" in page.inner_text("body"),
                 what="the live figures in the page",
                 tab=tab,
             )
+            _wait_for(  # the four signal charts follow the live frames
+                lambda: (
+                    len(page.evaluate(CHARTS_JS)) == 4
+                    and min(row["frames"] for row in page.evaluate(CHARTS_JS)) > 170
+                ),
+                what="the charts with the live frames",
+                tab=tab,
+            )
+            page.get_by_text("● live: capture").scroll_into_view_if_needed()
             page.screenshot(path=str(ARTIFACTS / "app-live-tracking.png"))
             figures = live.figures()
             assert figures.processed > 10 and figures.captured >= figures.processed

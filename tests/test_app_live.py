@@ -87,6 +87,7 @@ def test_a_video_played_live_is_tracked_on_its_newest_frames_recorded_and_reopen
     run.advance = slow_advance
     live.start()
     assert live.state == TRACKING
+    live_started = live.started[0]
     boxes: dict[int, dict[str, tuple[float, ...]]] = {}
     figures = None
     while live.state == TRACKING:
@@ -97,7 +98,7 @@ def test_a_video_played_live_is_tracked_on_its_newest_frames_recorded_and_reopen
             }
             figures = live.figures()
             status = live.snapshot().status
-            assert status.startswith("🔴 live: capture") and "dropped" in status
+            assert status.startswith("● live: capture") and "dropped" in status
             processed = list(live.log.processed)
             capture_times = list(reader.capture_times)
     assert live.state == OFF
@@ -105,10 +106,14 @@ def test_a_video_played_live_is_tracked_on_its_newest_frames_recorded_and_reopen
 
     # Drops and latencies are reported: the slow tracker leaves at least one frame out
     # between two processed ones, and each latency covers its wait for two newer frames.
-    indices = [frame.index for frame in processed if frame.index > frozen]
-    assert len(indices) >= 3 and (np.diff(indices) >= 2).all()
+    indices = [frame.index for frame in processed if frame.index > live_started]
+    waited = [
+        (a, b) for a, b in zip(indices, indices[1:], strict=False) if a + 3 <= len(capture_times)
+    ]
+    assert len(waited) >= 3 and all(b - a >= 2 for a, b in waited)  # (not at the video's end)
     assert figures is not None and figures.dropped > 0 and figures.processed == len(indices)
-    assert figures.captured == figures.processed + figures.dropped
+    in_flight = figures.captured - figures.processed - figures.dropped
+    assert 0 <= in_flight <= 2  # the newest frame(s), not taken yet
     assert math.isfinite(figures.latency_ms) and figures.latency_ms > 0
     for frame in processed:
         if frame.index > frozen and frame.index + 2 < len(capture_times):
