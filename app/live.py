@@ -105,16 +105,19 @@ class LiveControl:
         source = live_source(text, controller.roots)
         scene_path = resolve_user_path(scene_text, controller.roots) if scene_text.strip() else None
         scene = None if scene_path is None else load_scene(scene_path)
-        self.close()
+        reader = LiveReader(source).start()  # a source that fails leaves the open run alone
+        try:
+            first = reader.next_frame()
+            if first is None:
+                raise InputError(f"{describe_source(source)} delivered no frame")
+        except Exception:
+            reader.close()
+            raise
+        self.halt()  # a live run open before is stopped and kept
         controller.stop_playing()
         controller.close_run()
-        reader = LiveReader(source)
-        self.reader, self.source, self.scene_path = reader.start(), source, scene_path
-        self._scene = scene
-        self.newest = reader.next_frame()
-        if self.newest is None:
-            self.close()
-            raise InputError(f"{describe_source(source)} delivered no frame")
+        self.reader, self.source, self.newest = reader, source, first
+        self.scene_path, self._scene = scene_path, scene
         self.state = PREVIEW
         controller.message = (
             f"Live: {describe_source(source)}. Freeze a frame to draw the boxes on it."
@@ -214,7 +217,8 @@ class LiveControl:
             frame, _outcome = next(self._outcomes)
         except StopIteration:
             figures = self.figures()
-            self._say_recorded(self._finish(), figures, f"{describe_source(self.source)} ended")
+            ended = "ended" if isinstance(self.source, Path) else "stopped sending (ended or lost)"
+            self._say_recorded(self._finish(), figures, f"{describe_source(self.source)} {ended}")
             return
         except InputError as error:
             figures = self.figures()

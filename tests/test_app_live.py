@@ -6,6 +6,7 @@ live sources need the server's --allow-live flag and typed sources are checked."
 from __future__ import annotations
 
 import math
+import time
 from pathlib import Path
 
 import cv2
@@ -191,6 +192,76 @@ def test_a_source_that_cannot_be_opened_says_so_and_opens_nothing(
 ) -> None:
     (media / "broken.avi").write_bytes(b"not a video at all" * 100)
     controller, live = _live_tab(tmp_path)
+    controller.open_initial()  # the demo
+    opened = controller.run
     with pytest.raises(InputError, match="cannot open .*broken.avi"):
         live.open_source("broken.avi")
-    assert live.state == OFF and controller.run is None
+    assert live.state == OFF and live.reader is None
+    assert controller.run is opened and controller.run.frame_count == 60  # still open
+    controller.close()
+
+
+class _MjpegStream:
+    """An IP camera on 127.0.0.1: the demo's frames as an HTTP MJPEG stream at 10 fps (the
+    first frame held for 2 s, time to freeze it), then the connection dropped mid-flight."""
+
+    def __init__(self, frames: int = 45) -> None:
+        import threading
+        from http.server import BaseHTTPRequestHandler, ThreadingHTTPServer
+
+        source = open_frames(DEMO_DIR / "img")
+        order = [0] * 20 + list(range(frames - 20))
+        jpegs = [cv2.imencode(".jpg", source.read_bgr(i))[1].tobytes() for i in order]
+        source.close()
+
+        class Camera(BaseHTTPRequestHandler):
+            def do_GET(self) -> None:
+                self.send_response(200)
+                self.send_header("Content-Type", "multipart/x-mixed-replace; boundary=frame")
+                self.end_headers()
+                for jpeg in jpegs:
+                    part = b"--frame\r\nContent-Type: image/jpeg\r\nContent-Length: %d\r\n\r\n"
+                    self.wfile.write(part % len(jpeg) + jpeg + b"\r\n")
+                    self.wfile.flush()
+                    time.sleep(1.0 / VIDEO_FPS)
+                self.close_connection = True  # the camera goes away
+
+            def log_message(self, *args: object) -> None:
+                pass
+
+        self.server = ThreadingHTTPServer(("127.0.0.1", 0), Camera)
+        self.thread = threading.Thread(target=self.server.serve_forever, daemon=True)
+        self.thread.start()
+        self.url = f"http://127.0.0.1:{self.server.server_address[1]}/stream.mjpg"
+
+    def close(self) -> None:
+        self.server.shutdown()
+        self.server.server_close()
+
+
+def test_a_stream_that_disconnects_mid_run_says_so_and_keeps_the_recording(
+    tmp_path: Path, media: Path
+) -> None:
+    from autotrack.tracker.tracker import warm_up
+
+    warm_up()
+    camera = _MjpegStream()
+    try:
+        controller, live = _live_tab(tmp_path)
+        live.open_source(camera.url, str(DEMO_DIR / "scene.json"))
+        live.freeze()
+        live.load_boxes_json()
+        live.start()
+        tracked = 0
+        while live.state == TRACKING:
+            live.step()
+            tracked += live.state == TRACKING
+    finally:
+        camera.close()
+    assert tracked >= 3
+    assert controller.message.startswith(f"{camera.url} stopped sending (ended or lost)")
+    path = next((tmp_path / "sessions").glob("*.mcap"))
+    assert f"recorded to {path.name}" in controller.message
+    session = open_session(path)
+    assert session.source == camera.url and session.image_count == tracked + 1
+    assert controller.run.frames.recorded_indices[-1] == controller.cursor
