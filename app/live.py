@@ -22,7 +22,7 @@ import numpy as np
 from app.controller import POSE_OPTIONS, TabController
 from app.paths import live_source, resolve_user_path
 from app.views import FrameView, SignalHistory
-from autotrack.errors import InputError
+from autotrack.errors import AutoTrackError, InputError
 from autotrack.io.boxes_json import read_boxes_json
 from autotrack.io.live import CapturedFrame, LiveFrames, LiveLog, LiveReader, describe_source
 from autotrack.localization.pnp import boxes_by_landmark
@@ -89,6 +89,8 @@ class LiveControl:
         self.started = (-1, 0.0)
         """At Start: the last frame the source had delivered, the reader's clock (s)."""
         self._last_result: float | None = None
+        self.review_error = ""
+        """Why the last recording could not be reopened to look through ('' if it was)."""
 
     @property
     def active(self) -> bool:
@@ -245,15 +247,21 @@ class LiveControl:
         self.close()
         self.controller.close_run()
         if path is not None and path.is_file():
-            self.controller.review_session(path)
+            try:
+                self.controller.review_session(path)
+            except AutoTrackError as error:  # the recording stays on disk as written
+                self.review_error = str(error)
             return path
         return None
 
     def _say_recorded(self, path: Path | None, figures: LiveFigures | None, what: str) -> None:
         figures_text = "" if figures is None else f" ({figures.text().removeprefix('● ')})"
-        where = (
-            f"; recorded to {path.name}, reopened to look through" if path else "; nothing recorded"
-        )
+        if path is None:
+            where = "; nothing recorded"
+        elif self.controller.run is None:  # the review failed
+            where = f"; recorded to {path.name} (cannot reopen it here: {self.review_error})"
+        else:
+            where = f"; recorded to {path.name}, reopened to look through"
         self.controller.message = f"{what}{figures_text}{where}."
 
     def figures(self) -> LiveFigures | None:
