@@ -39,6 +39,13 @@ CHARTS_JS = """() => Object.values(window.__viserTestpoints?.uplots ?? {}).map((
     frames: entry.chart.data[0].length, x_max: entry.chart.scales.x.max,
     y_min: entry.chart.scales.y.min, y_max: entry.chart.scales.y.max,
     labels: entry.chart.series.map((s) => s.label)}))"""
+SAME_CHARTS_JS = """() => {
+    const now = Object.values(window.__viserTestpoints?.uplots ?? {}).map((e) => e.chart);
+    const same = (window.__seenCharts ?? []).length === now.length
+        && now.every((chart, i) => chart === window.__seenCharts[i]);
+    window.__seenCharts = now;
+    return same;
+}"""
 SHUFFLED = ("C", "A", "D", "B")
 """The order the test draws the demo's landmarks in (not the scene's)."""
 
@@ -442,6 +449,12 @@ def test_a_live_source_is_tracked_in_chromium(live_studio, tmp_path: Path) -> No
                 what="the charts with the live frames",
                 tab=tab,
             )
+            # ... and are the same charts from frame to frame (not rebuilt as the source grows,
+            # which left them blank in the page).
+            page.evaluate(SAME_CHARTS_JS)
+            first = controller.cursor
+            _wait_for(lambda: controller.cursor > first + 10, what="ten more frames", tab=tab)
+            assert page.evaluate(SAME_CHARTS_JS), "the charts were rebuilt while tracking live"
             page.get_by_text("● live: capture").scroll_into_view_if_needed()
             page.screenshot(path=str(ARTIFACTS / "app-live-tracking.png"))
             figures = live.figures()
