@@ -18,8 +18,9 @@ EXPORTS = ("tracks", "poses", "mcap")
 
 def build(run: Pipeline, what: str) -> tuple[str, bytes]:
     """(file name, content) of a download of `run`'s recording: 'tracks', 'poses' or 'mcap'
-    (a finished snapshot of the file being written)."""
-    path = run.session_path
+    (a finished snapshot of the file being written). A run reopened only to look through (a
+    live recording: no new file) exports the file it was reopened from."""
+    path = run.session_path or (run.resumed_from if run.recording is None else None)
     if path is None:
         raise InputError("nothing recorded yet: draw a box and track first")
     run.flush()

@@ -142,6 +142,8 @@ def test_a_video_played_live_is_tracked_on_its_newest_frames_recorded_and_reopen
     np.testing.assert_allclose(view.drawings["T2"].box, boxes[some]["T2"], atol=1e-3)
     controller.seek(dropped[-1])
     assert not controller.snapshot().drawings
+    name, content = controller.export("mcap")  # the downloads are the live recording's
+    assert name == path.name and content[:8] == path.read_bytes()[:8]
     # ... and so does reopening it from the Session list.
     controller.refresh_sessions()
     controller.reopen(path.name)
