@@ -204,6 +204,12 @@ def run(args: argparse.Namespace) -> int:
             file=sys.stderr,
             flush=True,
         )
+    if args.allow_live:
+        print(
+            "--allow-live: browser users may open cameras, rtsp/http streams this machine can "
+            "reach and videos under the allowed folders",
+            flush=True,
+        )
     print(f"sessions are recorded in {config.sessions_dir.resolve()}; Ctrl-C stops", flush=True)
     stopped = threading.Event()
     # A service manager's SIGTERM also closes the tabs, so every recording is finished.
