@@ -95,6 +95,12 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
         default=4,
         help="most targets a tab may have at once (default 4: the demo scene's landmarks)",
     )
+    parser.add_argument(
+        "--allow-live",
+        action="store_true",
+        help="let browser users open live sources: a camera index, an rtsp:// or http(s):// "
+        "stream, or a video under the allowed folders played in real time (off by default)",
+    )
     parser.set_defaults(func=run)
 
 
@@ -217,6 +223,7 @@ def run(args: argparse.Namespace) -> int:
         canvas_fps=args.canvas_fps,
         max_targets=args.max_targets,
         share_sessions=args.share_sessions,
+        allow_live=args.allow_live,
     )
     if args.no_token:
         config = replace(config, token=None)
@@ -237,6 +244,12 @@ def run(args: argparse.Namespace) -> int:
             + (f", and {reach}," if reach else "")
             + " can drive this app",
             file=sys.stderr,
+            flush=True,
+        )
+    if args.allow_live:
+        print(
+            "--allow-live: browser users may open cameras, rtsp/http streams this machine can "
+            "reach and videos under the allowed folders",
             flush=True,
         )
     print(f"sessions are recorded in {config.sessions_dir.resolve()}; Ctrl-C stops", flush=True)

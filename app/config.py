@@ -41,6 +41,9 @@ class AppConfig:
     draws only a few per second; the GUI video panel is not capped)."""
     token: str | None = field(default_factory=new_token)
     """Secret every request must carry (in the URL, then a cookie); None: no token (warned)."""
+    allow_live: bool = False
+    """Whether browser users may open live sources (cameras, rtsp/http streams, videos played
+    in real time): `autotrack app --allow-live`."""
     upload_limits: UploadLimits = field(default_factory=UploadLimits)
     """Bounds on uploads."""
     share_sessions: bool = False

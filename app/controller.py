@@ -34,6 +34,7 @@ from autotrack.localization.scene import Scene, load_scene
 from autotrack.params import PRESETS, preset
 from autotrack.pipeline import Pipeline, Recording, TrackedTarget
 from autotrack.sessions import open_session
+from autotrack.sessions.frames import EmbeddedFrames
 
 POSE_OPTIONS = {"refine_params": RefineParams(), "reacquire_params": ReacquireParams()}
 """With a scene, the pipeline gives the solver sub-pixel landmark points and re-acquires lost
@@ -149,16 +150,16 @@ class TabController:
 
     def open_typed(self, text: str) -> None:
         """Open a sequence path typed by the user (it must lie under the allowed folders)."""
-        self.open(self._resolve(text), None)
+        self.open(self.resolve_path(text), None)
 
     def use_scene(self, text: str) -> None:
         """Reopen the sequence with the scene file typed by the user (empty: no scene)."""
         if self.sequence_path is None:
             raise InputError("open a sequence first")
-        scene = self._resolve(text.strip()) if text.strip() else None
+        scene = self.resolve_path(text.strip()) if text.strip() else None
         self.open(self.sequence_path, scene, scene_given=True)
 
-    def _resolve(self, text: str) -> Path:
+    def resolve_path(self, text: str) -> Path:
         """A path the user typed (or a session names), under this tab's folders and not in
         another browser's space (app/owners.py)."""
         path = resolve_user_path(text, self.roots)
@@ -198,7 +199,7 @@ class TabController:
         except Exception:
             frames.close()
             raise
-        self._start(run, path, scene_path)
+        self.install_run(run, path, scene_path)
 
     def _load(
         self, path: Path, scene_path: Path | None, *, scene_given: bool
@@ -220,7 +221,7 @@ class TabController:
         """A new session file in the sessions folder, created at the first box."""
         return Recording(source=str(path), directory=self.space.sessions_dir, scene_path=scene_path)
 
-    def _start(self, run: Pipeline, path: Path, scene_path: Path | None) -> None:
+    def install_run(self, run: Pipeline, path: Path, scene_path: Path | None) -> None:
         """Make `run` (on the sequence `path`) this tab's run, replacing the current one."""
         self.close_run()
         self.run = run
@@ -253,7 +254,7 @@ class TabController:
         self.run = None
         self.recording_path = None
 
-    def _claim_recording(self) -> None:
+    def claim_recording(self) -> None:
         """Register the run's session file (created at the first edit) as this tab's."""
         path = None if self.run is None else self.run.session_path
         if path is not None and path != self.recording_path:
@@ -287,7 +288,7 @@ class TabController:
             self.message = (
                 f"{target_id} {verb}{why} at frame {self.cursor + 1}; it re-tracks from here."
             )
-        self._claim_recording()
+        self.claim_recording()
 
     def _search_landmarks(self) -> None:
         """Tie the targets on this frame to landmarks (see LandmarkTies.search) and say how."""
@@ -315,7 +316,7 @@ class TabController:
             f"{self.truth_target} started from the ground truth at frame {self.cursor + 1}; "
             "play to score it (Debugging → Ground truth)."
         )
-        self._claim_recording()
+        self.claim_recording()
 
     def scored_target(self) -> TrackedTarget | None:
         """The target scored against the ground truth: the one started from it, else T1."""
@@ -363,7 +364,7 @@ class TabController:
         self.cursor = 0
         run.add_targets(0, boxes)
         self.message = f"Loaded {len(boxes)} boxes from boxes.json on frame 1."
-        self._claim_recording()
+        self.claim_recording()
 
     # -- playback -----------------------------------------------------------------------------
 
@@ -440,8 +441,10 @@ class TabController:
         if self.recordings.writer_of(path) is not None:
             raise InputError(f"{path.name} is being recorded by another tab; reopen it later")
         session = open_session(path)
-        source = self._resolve(session.source)
-        scene_path = self._resolve(session.scene_path) if session.scene_path else None
+        if session.image_count:  # a live run's recording: its own frames, to look through
+            return self.review_session(path)
+        source = self.resolve_path(session.source)
+        scene_path = self.resolve_path(session.scene_path) if session.scene_path else None
         frames, scene, scene_path = self._load(source, scene_path, scene_given=True)
         try:
             run = Pipeline.resume(
@@ -455,23 +458,34 @@ class TabController:
         except Exception:
             frames.close()
             raise
-        self._start(run, source, scene_path)
+        self.install_run(run, source, scene_path)
         self.cursor = run.resume_frame
-        self._claim_recording()
+        self.claim_recording()
         note = " (the file was cut short)" if session.truncated else ""
         self.message = (
             f"Reopened {path.name}{note}: {len(run.targets)} targets, continuing from frame "
             f"{self.cursor + 1}; recording to a new session file."
         )
 
+    def review_session(self, path: Path) -> None:
+        """Open a session that embeds its frames (a live run's recording) to look through, on
+        those frames and with no new recording: its source cannot be replayed past them."""
+        session = open_session(path)
+        scene_path = session.scene_path and self.resolve_path(session.scene_path)
+        scene = load_scene(scene_path) if scene_path else None
+        threads = self.config.tracker_threads
+        frames = EmbeddedFrames(session)
+        run = Pipeline.resume(session, frames, scene=scene, tracker_threads=threads, **POSE_OPTIONS)
+        self.install_run(run, path, scene_path or None)
+        self.cursor = run.resume_frame
+        self.message = (
+            f"Reopened {path.name}: {len(frames.recorded_indices)} frames recorded live (the "
+            f"dropped frames show the frame before them)."
+        )
+
     def export(self, what: str) -> tuple[str, bytes]:
-        """(file name, content) of a download: 'tracks', 'poses' or 'mcap' (exports.EXPORTS)."""
-        run = self.require_run()
-        path = run.session_path
-        if path is None:
-            raise InputError("nothing recorded yet: draw a box and track first")
-        run.flush()
-        name, content = exports.session_download(path, what)
+        """(file name, content) of a download: 'tracks', 'poses' or 'mcap' (app.exports)."""
+        name, content = exports.build(self.require_run(), what)
         self.message = f"Sent {name} ({len(content) / 1024:.0f} kB)."
         return name, content
 

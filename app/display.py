@@ -71,6 +71,8 @@ class DisplayStats:
     """Send times (time.monotonic) of the latest canvas frames."""
     video_times: deque[float] = field(default_factory=lambda: deque(maxlen=TIMES_KEPT))
     """Send times of the latest video-panel frames."""
+    video_targets: tuple[int, tuple[str, ...]] = (-1, ())
+    """The last video-panel frame sent: its index and the targets whose boxes it shows."""
 
 
 def map_panel_image(view: FrameView, target_id: str) -> np.ndarray:
@@ -275,6 +277,7 @@ class DisplayLoop:
             self.panels.video.image = picture(view, maps, VIDEO_MAX_WIDTH, self._show_truth())
             self.stats.video_frames += 1
             self.stats.video_times.append(now)
+            self.stats.video_targets = (view.frame_index, tuple(view.drawings))
             if maps in MAP_KINDS and any(
                 drawing.result is not None and drawing.result.response_map is not None
                 for drawing in view.drawings.values()

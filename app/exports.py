@@ -8,21 +8,28 @@ from io import BytesIO
 from pathlib import Path
 
 from autotrack.errors import InputError
+from autotrack.pipeline import Pipeline
 from autotrack.sessions import open_session, write_otb_tracks, write_tracks_csv, write_tum_poses
 from autotrack.sessions.snapshot import finished_copy
 
 EXPORTS = ("tracks", "poses", "mcap")
-"""What a tab can download: the tracks zip, the TUM poses, the session file itself."""
+"""What `build` can make: the tracks zip, the TUM poses, the session file itself."""
 
 
-def session_download(path: Path, what: str) -> tuple[str, bytes]:
-    """(file name, content) of the download `what` (one of EXPORTS) of the session `path`."""
+def build(run: Pipeline, what: str) -> tuple[str, bytes]:
+    """(file name, content) of a download of `run`'s recording: 'tracks', 'poses' or 'mcap'
+    (a finished snapshot of the file being written). A run reopened only to look through (a
+    live recording: no new file) exports the file it was reopened from."""
+    path = run.session_path or (run.resumed_from if run.recording is None else None)
+    if path is None:
+        raise InputError("nothing recorded yet: draw a box and track first")
+    run.flush()
     if what == "tracks":
         return f"{path.stem}_tracks.zip", tracks_zip(path)
     if what == "poses":
         return f"{path.stem}_poses.tum", poses_tum(path)
     if what == "mcap":
-        return path.name, finished_copy(path)  # a finished snapshot
+        return path.name, finished_copy(path)
     raise InputError(f"unknown export {what!r}; choose one of {EXPORTS}")
 
 

@@ -19,6 +19,7 @@ from app.boxes import format_box
 from app.config import AppConfig
 from app.controller import TabController
 from app.paths import display_name
+from app.live import DISABLED_HINT, FROZEN, OFF, PREVIEW, TRACKING, LiveControl
 from autotrack.params import PRESETS
 
 NEW_TARGET = "new target"
@@ -102,6 +103,49 @@ def _sequence_panel(gui: viser.GuiApi, config: AppConfig) -> SequencePanel:
                 "Upload video or zip of images", mime_type="video/*,.zip,application/zip"
             ),
         )
+
+
+@dataclass
+class LivePanel:
+    """The Live folder (controls only with `--allow-live`; else how to enable it)."""
+
+    note: viser.GuiMarkdownHandle
+    source: viser.GuiTextHandle | None = None
+    scene: viser.GuiTextHandle | None = None
+    open: viser.GuiButtonHandle | None = None
+    freeze: viser.GuiButtonHandle | None = None
+    start: viser.GuiButtonHandle | None = None
+    stop: viser.GuiButtonHandle | None = None
+
+
+def _live_panel(gui: viser.GuiApi, config: AppConfig) -> LivePanel:
+    with gui.add_folder("Live source", expand_by_default=config.allow_live):
+        if not config.allow_live:
+            return LivePanel(note=gui.add_markdown(DISABLED_HINT))
+        return LivePanel(
+            note=gui.add_markdown(
+                "A camera index (`0`), an `rtsp://` or `http(s)://` stream, or a video file "
+                "(played at its frame rate). Open, *Freeze* a frame, draw the boxes on it, "
+                "*Start*: the newest frame is always tracked and late frames are dropped."
+            ),
+            source=gui.add_text("Source", initial_value=""),
+            scene=gui.add_text("Live scene file", initial_value=""),
+            open=gui.add_button("Open live source", icon=viser.Icon.VIDEO),
+            freeze=gui.add_button("Freeze frame", disabled=True),
+            start=gui.add_button("Start tracking", disabled=True, icon=viser.Icon.PLAYER_PLAY),
+            stop=gui.add_button("Stop", disabled=True, color="red"),
+        )
+
+
+def show_live(panels: Panels, live: LiveControl) -> None:
+    """The live buttons enabled as the live state allows."""
+    widgets, quiet = panels.live, panels.quiet
+    if widgets.open is None:
+        return
+    quiet.set(widgets.freeze, "disabled", live.state != PREVIEW)
+    quiet.set(widgets.start, "disabled", live.state != FROZEN)
+    quiet.set(widgets.stop, "disabled", live.state == OFF)
+    quiet.set(widgets.open, "disabled", live.state == TRACKING)
 
 
 @dataclass
@@ -271,6 +315,7 @@ class Panels:
     status: viser.GuiMarkdownHandle
     video: viser.GuiImageHandle
     sequence: SequencePanel
+    live: LivePanel
     targets: TargetsPanel
     playback: PlaybackPanel
     display: DisplayPanel
@@ -290,6 +335,7 @@ def build_panels(gui: viser.GuiApi, config: AppConfig) -> Panels:
         status=status,
         video=video,
         sequence=_sequence_panel(gui, config),
+        live=_live_panel(gui, config),
         targets=_targets_panel(gui),
         playback=_playback_panel(gui),
         display=_display_panel(gui, config, debug.maps),
@@ -333,8 +379,12 @@ def show_opened(panels: Panels, controller: TabController) -> None:
 
 
 def show_frame(panels: Panels, controller: TabController) -> None:
-    """The frame slider at the current frame (1-based)."""
-    panels.quiet.set(panels.playback.frame, "value", controller.cursor + 1)
+    """The frame slider at the current frame (1-based), its end moved on as a live source
+    grows."""
+    slider = panels.playback.frame
+    if controller.cursor + 1 > slider.max:
+        panels.quiet.set(slider, "max", controller.cursor + 1)
+    panels.quiet.set(slider, "value", controller.cursor + 1)
 
 
 def show_playing(panels: Panels, playing: bool) -> None:

@@ -160,6 +160,37 @@ def find_sequences(roots: Sequence[Path], max_depth: int = 4, limit: int = 500) 
     return found[:limit]
 
 
+LIVE_URL_SCHEMES = ("rtsp", "rtsps", "http", "https")
+"""Stream URL schemes a browser user may open as a live source (with `--allow-live`)."""
+MAX_CAMERA_INDEX = 63
+"""Highest camera index a browser user may open."""
+
+
+def live_source(text: str, roots: Sequence[Path]) -> Path | str:
+    """The live source a browser user typed: a camera index ('0'), a stream URL of one of
+    LIVE_URL_SCHEMES (returned as text), or a video file under the allowed roots (played at its
+    frame rate). The text reaches OpenCV only, never a shell."""
+    cleaned = text.strip()
+    if not cleaned:
+        raise InputError("type a camera index (0), an rtsp:// or http(s):// URL, or a video file")
+    if cleaned.isascii() and cleaned.isdigit():
+        if int(cleaned) > MAX_CAMERA_INDEX:
+            raise InputError(f"camera index {cleaned} is out of range 0..{MAX_CAMERA_INDEX}")
+        return Path(str(int(cleaned)))
+    scheme, separator, rest = cleaned.partition("://")
+    if separator:
+        if scheme.lower() not in LIVE_URL_SCHEMES:
+            allowed = ", ".join(f"{name}://" for name in LIVE_URL_SCHEMES)
+            raise InputError(f"{scheme}:// streams are not allowed here; use {allowed}")
+        if not rest or not rest.split("/", 1)[0] or not cleaned.isprintable() or " " in cleaned:
+            raise InputError(f"{cleaned!r} is not a stream URL (rtsp://HOST[:PORT]/PATH)")
+        return cleaned
+    path = resolve_user_path(cleaned, roots)
+    if not path.is_file():
+        raise InputError(f"{display_name(path, roots)} is a folder: a live source is a video file")
+    return path
+
+
 def display_name(path: Path, roots: Sequence[Path]) -> str:
     """`path` relative to the root that holds it (prefixed by the root's name; a browser's
     own upload folder is named after the uploads folder that holds it)."""

@@ -151,8 +151,9 @@ class SignalPlots:
 
     def __init__(self, gui: viser.GuiApi, container: viser.GuiTabHandle | None = None) -> None:
         self.gui = gui
-        self._layout: tuple[tuple[str, ...], int] | None = None
-        """Target ids and frame count the charts were built for."""
+        self._layout: tuple[str, ...] | None = None
+        """Target ids the charts were built for (not the frame count: a live source's grows
+        with every frame, and the x range is sent with each update)."""
         self._handles: list[viser.GuiUplotHandle] = []
         self._scales: list[dict | None] = []
         self._container = container if container is not None else gui.add_folder("Plots")
@@ -192,7 +193,7 @@ class SignalPlots:
                 )
         self._handles = handles
         self._scales = [None] * len(handles)
-        self._layout = (history.target_ids, history.frame_count)
+        self._layout = history.target_ids
 
     def update(self, history: SignalHistory, cursor: int) -> None:
         """Send the latest values and the cursor at frame `cursor` (rebuilding the charts when
@@ -205,7 +206,7 @@ class SignalPlots:
             self._handles = []
             self._layout = None
             return
-        if (history.target_ids, history.frame_count) != self._layout:
+        if history.target_ids != self._layout:
             self._build(history)
         last = max(history.last_frame, cursor, 0)
         count = last + 1

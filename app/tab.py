@@ -10,6 +10,7 @@ Callbacks here are one line each: they read the widget's value and queue a contr
 from __future__ import annotations
 
 import time
+from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
@@ -21,6 +22,7 @@ from app.config import AppConfig
 from app.controller import TabController
 from app.display import DisplayLoop
 from app.owners import BrowserSpace
+from app.live import FROZEN, OFF, PREVIEW, LiveControl
 from app.panels import (
     CANVAS_3D,
     CANVAS_FRAME,
@@ -29,6 +31,7 @@ from app.panels import (
     NO_LANDMARK,
     build_panels,
     show_frame,
+    show_live,
     show_opened,
     show_state,
     show_targets,
@@ -71,10 +74,11 @@ class Tab:
         self._scene_shown = 0
         self._table_shown = 0.0
         controller = self.controller
+        self.live = LiveControl(controller, config.allow_live)
         self.worker = Worker(
-            is_playing=lambda: controller.playing,
-            play_step=controller.play_step,
-            frame_period=self.panels.playback.frame_period,
+            is_playing=lambda: controller.playing or self.live.active,
+            play_step=self._play_step,
+            frame_period=self._frame_period,
             after_command=self._command_done,
             after_step=self._step_done,
             report=self._report,
@@ -109,7 +113,7 @@ class Tab:
         )
         targets.apply_box.on_click(lambda _: submit(self.place_typed_box, targets.box.value))
         targets.delete.on_click(lambda _: submit(controller.delete_selected))
-        targets.boxes_json.on_click(lambda _: submit(controller.load_boxes_json))
+        targets.boxes_json.on_click(lambda _: submit(self.load_boxes_json))
         targets.from_truth.on_click(
             lambda _: (
                 self._busy("starting from the ground truth…"),
@@ -117,21 +121,65 @@ class Tab:
             )
         )
         targets.show_truth.on_update(edit(lambda: submit(self.display.wake, canvas=True)))
-        playback.play.on_click(lambda _: submit(controller.toggle_play))
-        playback.step_back.on_click(lambda _: submit(controller.step, -1))
-        playback.step.on_click(lambda _: submit(controller.step, 1))
+        playback.play.on_click(lambda _: submit(self.not_live, controller.toggle_play))
+        playback.step_back.on_click(lambda _: submit(self.not_live, controller.step, -1))
+        playback.step.on_click(lambda _: submit(self.not_live, controller.step, 1))
         playback.frame.on_update(edit(lambda: submit(self.seek, int(playback.frame.value) - 1)))
         display.canvas.on_update(edit(lambda: submit(self.canvas_mode_changed)))
         display.maps.on_update(edit(lambda: submit(self.maps_changed)))
         display.trajectory.on_update(edit(lambda: submit(self.display.wake)))
         display.canvas_fps.on_update(edit(self.display.wake))
+        self._connect_live()
         session.download_tracks.on_click(lambda _: submit(self.download, "tracks"))
         session.download_poses.on_click(lambda _: submit(self.download, "poses"))
         session.download_mcap.on_click(lambda _: submit(self.download, "mcap"))
         session.refresh.on_click(lambda _: submit(controller.refresh_sessions))
         session.reopen.on_click(lambda _: submit(controller.reopen, session.sessions.value))
 
+    def _connect_live(self) -> None:
+        """The Live folder's buttons (absent without --allow-live)."""
+        widgets, live, submit = self.panels.live, self.live, self.worker.submit
+        if widgets.open is None:
+            return
+        widgets.open.on_click(
+            lambda _: (
+                self._busy("opening the live source…"),
+                submit(live.open_source, widgets.source.value, widgets.scene.value),
+            )
+        )
+        widgets.freeze.on_click(lambda _: submit(live.freeze))
+        widgets.start.on_click(lambda _: submit(live.start))
+        widgets.stop.on_click(lambda _: submit(live.stop))
+
     # -- commands that need the browser as well as the controller ----------------------------
+
+    def _play_step(self) -> None:
+        """Play the next frame, or while live take the newest (a failure ends the live run)."""
+        if not self.live.active:
+            self.controller.play_step()
+            return
+        try:
+            self.live.step()
+        except Exception:
+            self.live.halt()
+            raise
+
+    def _frame_period(self) -> float:
+        """The playback period; live frames come at the source's rate (the step waits)."""
+        return 0.0 if self.live.active else self.panels.playback.frame_period()
+
+    def not_live(self, command: Callable[..., None], *args: object) -> None:
+        """Run a playback command, refused while a live source is open."""
+        if self.live.state != OFF:
+            raise InputError("a live source is open: Stop it to look back through its recording")
+        command(*args)
+
+    def load_boxes_json(self) -> None:
+        """boxes.json on frame 1, or on the frozen frame of a live source."""
+        if self.live.state == FROZEN:
+            self.live.load_boxes_json()
+        else:
+            self.controller.load_boxes_json()
 
     def open_initial(self) -> None:
         """Queue the start-up sequence (the configured one, else the demo)."""
@@ -174,6 +222,8 @@ class Tab:
         self, screen_min: tuple[float, float], screen_max: tuple[float, float]
     ) -> None:
         """A drag (canvas fractions) as a box in frame pixels, placed on the current frame."""
+        if self.live.state == PREVIEW:
+            raise InputError("freeze a frame first, then draw the boxes on it")
         letterbox = self.display.canvas_letterbox(self.controller.frame_size)
         box = letterbox.rect_to_box(screen_min, screen_max)
         if box is None:
@@ -182,6 +232,8 @@ class Tab:
 
     def seek(self, frame_index: int) -> None:
         """Go to a frame chosen on the slider; tracking up to it stops at the next command."""
+        if self.live.state != OFF:
+            raise InputError("a live source is open: Stop it to look back through its recording")
         self.controller.seek(frame_index, interrupted=self.worker.has_waiting)
         if self.panels.display.canvas.value == CANVAS_3D:  # after a jump, frame it all again
             self._aim_camera()
@@ -210,7 +262,9 @@ class Tab:
 
     def _command_done(self) -> None:
         controller = self.controller
+        self.live.forget_if_replaced()
         show_state(self.panels, controller)  # first: it may replace the sequence list
+        show_live(self.panels, self.live)
         if controller.sequences_opened != self._scene_shown:
             self._scene_shown = controller.sequences_opened
             run = controller.run
@@ -223,8 +277,8 @@ class Tab:
         self._publish()
 
     def _step_done(self) -> None:
-        if not self.controller.playing:  # the last frame was reached: as after a pause
-            show_state(self.panels, self.controller)
+        if not self.controller.playing and not self.live.active:  # playback ended by itself
+            self._command_done()
 
     def _frame_changed(self) -> None:
         show_frame(self.panels, self.controller)
@@ -235,7 +289,7 @@ class Tab:
         self._publish()
 
     def _publish(self) -> None:
-        view = self.controller.snapshot()
+        view = self.live.snapshot()  # the controller's view, or the live one
         if view is not None:
             self.display.publish(view)
 
@@ -271,6 +325,7 @@ class Tab:
     def close(self) -> None:
         """Stop the threads and finish the recording (the tab's browser went away)."""
         self.worker.close()
+        self.live.halt()
         self.display.close()
         self.controller.close()
 

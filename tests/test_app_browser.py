@@ -13,6 +13,7 @@ import time
 import zipfile
 from pathlib import Path
 
+import cv2
 import numpy as np
 import pytest
 
@@ -38,6 +39,13 @@ CHARTS_JS = """() => Object.values(window.__viserTestpoints?.uplots ?? {}).map((
     frames: entry.chart.data[0].length, x_max: entry.chart.scales.x.max,
     y_min: entry.chart.scales.y.min, y_max: entry.chart.scales.y.max,
     labels: entry.chart.series.map((s) => s.label)}))"""
+SAME_CHARTS_JS = """() => {
+    const now = Object.keys(window.__viserTestpoints?.uplots ?? {}).sort().join(" ");
+    const same = now !== "" && now === window.__seenCharts;
+    window.__seenCharts = now;
+    return same;
+}"""
+"""Whether the page holds the same chart elements (by id) as at the previous call."""
 SHUFFLED = ("C", "A", "D", "B")
 """The order the test draws the demo's landmarks in (not the scene's)."""
 
@@ -332,3 +340,133 @@ def test_start_from_ground_truth_and_read_the_scores_in_chromium(tmp_path: Path,
 def _choose(page, label: str, option: str) -> None:
     page.get_by_label(label, exact=True).click()
     page.get_by_role("option", name=option).click()
+
+
+def _text_input(page, label: str):
+    """viser's text input beside `label` (its label is not tied to the input)."""
+    return page.locator(f"xpath=//*[normalize-space(text())='{label}']/following::input[1]")
+
+
+def _hovering_flight_video(path: Path, fps: float = 10.0) -> Path:
+    """The demo as a video played live: 15 s hovering on its first frame (time to freeze and
+    place the boxes.json boxes, drawn for that frame), then the flight out and back, twice."""
+    from autotrack.io.frames import open_frames
+
+    source = open_frames(DEMO / "img")
+    order = [0] * 150 + (list(range(len(source))) + list(range(len(source) - 1, -1, -1))) * 2
+    writer = cv2.VideoWriter(str(path), cv2.VideoWriter_fourcc(*"MJPG"), fps, source.frame_size)
+    for index in order:
+        writer.write(source.read_bgr(index))
+    writer.release()
+    source.close()
+    return path
+
+
+@pytest.fixture
+def live_studio(tmp_path: Path):
+    if not CHROMIUM.exists():
+        pytest.skip("/usr/bin/chromium is not installed (apt-get install chromium)")
+    pytest.importorskip("playwright.sync_api")
+    from app.config import AppConfig
+    from app.server import StudioServer
+
+    media = tmp_path / "media"
+    media.mkdir()
+    _hovering_flight_video(media / "flight.avi")
+    config = AppConfig(
+        port=0,
+        sessions_dir=tmp_path / "sessions",
+        allowed_roots=(media,),
+        demo_dir=DEMO,
+        tracker_threads=2,
+        allow_live=True,
+    )
+    server = StudioServer(config)
+    server.warm_up.join(timeout=120)
+    yield server
+    server.stop()
+
+
+def test_a_live_source_is_tracked_in_chromium(live_studio, tmp_path: Path) -> None:
+    from playwright.sync_api import sync_playwright
+
+    from app.live import FROZEN, OFF, PREVIEW, TRACKING
+    from autotrack.sessions import open_session
+
+    ARTIFACTS.mkdir(exist_ok=True)
+    with sync_playwright() as playwright:
+        browser = playwright.chromium.launch_persistent_context(
+            str(tmp_path / "profile"),
+            executable_path=str(CHROMIUM),
+            headless=True,
+            args=CHROMIUM_FLAGS,
+            viewport=VIEWPORT,
+        )
+        try:
+            page = browser.new_page()
+            page.goto(live_studio.url)
+            _wait_for(lambda: len(live_studio.tabs) == 1, what="the tab to connect")
+            tab = next(iter(live_studio.tabs.values()))
+            assert tab.wait_idle()
+            live, controller, stats = tab.live, tab.controller, tab.display.stats
+            _text_input(page, "Source").fill("flight.avi")
+            _text_input(page, "Live scene file").fill(str(DEMO / "scene.json"))
+            _wait_for(
+                lambda: tab.panels.live.scene.value == str(DEMO / "scene.json"),
+                what="the typed source and scene to reach the server",
+            )
+            page.get_by_role("button", name="Open live source").click()
+            _wait_for(lambda: live.state == PREVIEW, what="the preview", tab=tab)
+            _wait_for(lambda: stats.video_targets[0] > 5, what="the preview frames", tab=tab)
+            page.get_by_role("button", name="Freeze frame").click()
+            _wait_for(lambda: live.state == FROZEN, what="the frozen frame", tab=tab)
+            page.get_by_role("button", name="Load boxes.json").click()
+            _wait_for(lambda: len(controller.run.targets) == 4, what="the four boxes", tab=tab)
+            frozen = controller.cursor
+            page.screenshot(path=str(ARTIFACTS / "app-live-frozen-boxes.png"))
+            page.get_by_role("button", name="Start tracking").click()
+            _wait_for(lambda: live.state == TRACKING, what="tracking", tab=tab)
+            # Past the hover and into the flight, the page gets the tracked boxes.
+            _wait_for(lambda: controller.cursor > 170, timeout=90, what="the flight", tab=tab)
+            _wait_for(
+                lambda: (
+                    stats.video_targets[0] > 170
+                    and stats.video_targets[1] == ("T1", "T2", "T3", "T4")
+                ),
+                what="a live frame with its four tracked boxes sent to the page",
+                tab=tab,
+            )
+            _wait_for(
+                lambda: "● live: capture" in page.inner_text("body"),
+                what="the live figures in the page",
+                tab=tab,
+            )
+            _wait_for(  # the four signal charts follow the live frames
+                lambda: (
+                    len(page.evaluate(CHARTS_JS)) == 4
+                    and min(row["frames"] for row in page.evaluate(CHARTS_JS)) > 170
+                ),
+                what="the charts with the live frames",
+                tab=tab,
+            )
+            # ... and are the same chart elements from frame to frame (not removed and added
+            # again as the source grows, which left them blank in the page).
+            page.evaluate(SAME_CHARTS_JS)
+            first = controller.cursor
+            _wait_for(lambda: controller.cursor > first + 10, what="ten more frames", tab=tab)
+            assert page.evaluate(SAME_CHARTS_JS), "the charts were rebuilt while tracking live"
+            page.get_by_text("● live: capture").scroll_into_view_if_needed()
+            page.screenshot(path=str(ARTIFACTS / "app-live-tracking.png"))
+            figures = live.figures()
+            assert figures.processed > 10 and figures.captured >= figures.processed
+            page.get_by_role("button", name="Stop").click()
+            _wait_for(lambda: live.state == OFF, what="the stop", tab=tab)
+            assert tab.wait_idle()
+            assert "recorded to" in controller.message
+            page.screenshot(path=str(ARTIFACTS / "app-live-stopped.png"))
+            session = open_session(next((tmp_path / "sessions").glob("*.mcap")))
+            assert session.image_count >= figures.processed + 1  # the frozen frame too
+            recorded = controller.run.frames.recorded_indices
+            assert recorded[0] == frozen and len(recorded) == session.image_count
+        finally:
+            browser.close()

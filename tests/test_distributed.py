@@ -8,7 +8,10 @@ import json
 import os
 import re
 import socket
+import subprocess
 import sys
+import threading
+import time
 from pathlib import Path
 
 import numpy as np
@@ -270,3 +273,69 @@ def test_a_worker_dying_mid_run_is_one_cluster_error():
         cluster_executor(doomed.scheduler_address) as executor,
     ):
         executor.submit(os._exit, 1).result()  # the worker process exits under the task
+
+
+def _free_port() -> int:
+    with socket.socket() as probe:
+        probe.bind(("127.0.0.1", 0))
+        return probe.getsockname()[1]
+
+
+def _start_cluster_processes(port: int) -> list[subprocess.Popen]:
+    """A `dask scheduler` process and one `dask worker` process on 127.0.0.1:`port`."""
+    dask = str(Path(sys.executable).parent / "dask")
+    quiet = {"stdout": subprocess.DEVNULL, "stderr": subprocess.DEVNULL}
+    address = f"tcp://127.0.0.1:{port}"
+    scheduler_argv = ["scheduler", "--host", "127.0.0.1", "--port", str(port), "--no-dashboard"]
+    scheduler = subprocess.Popen([dask, *scheduler_argv], **quiet)
+    worker_argv = ["worker", address, "--nthreads", "1", "--no-dashboard"]
+    worker = subprocess.Popen([dask, *worker_argv], **quiet)
+    return [scheduler, worker]
+
+
+def _stop(processes: list[subprocess.Popen]) -> None:
+    for process in processes:
+        if process.poll() is None:
+            process.kill()
+        process.wait(timeout=30)
+
+
+@pytest.mark.slow
+def test_a_killed_scheduler_ends_the_sweep_in_one_line_and_a_rerun_resumes(tmp_path, capsys):
+    root = tmp_path / "Synthetic"
+    for number in range(3):
+        _write_moving_square(root / f"square{number}", 40, (1, 1), seed=number)
+    out = tmp_path / "sweep"
+    port = _free_port()
+    argv = ["sweep", str(root), "--grid", "phi=0.2,0.3", "--grid", "delta=0.1,0.2"]
+    argv += ["--out", str(out), "--no-progress", "--scheduler", f"tcp://127.0.0.1:{port}"]
+    processes = _start_cluster_processes(port)
+    try:
+
+        def kill_scheduler_after_the_first_run() -> None:
+            deadline = time.monotonic() + 300
+            while not list(out.rglob("*.txt")) and time.monotonic() < deadline:
+                time.sleep(0.05)
+            processes[0].kill()  # the scheduler process, not a worker
+
+        killer = threading.Thread(target=kill_scheduler_after_the_first_run)
+        killer.start()
+        assert main(argv) == 2
+        killer.join()
+    finally:
+        _stop(processes)
+    error = capsys.readouterr().err.strip()
+    assert error == (
+        f"autotrack: error: lost the connection to the Dask scheduler at tcp://127.0.0.1:{port} "
+        "(it stopped or the network failed); the runs saved so far are kept: rerun the same "
+        "command to resume once the scheduler is back"
+    )
+    kept = len(list(out.rglob("*.txt")))
+    assert 1 <= kept < 12
+    processes = _start_cluster_processes(port)
+    try:
+        assert main(argv) == 0
+    finally:
+        _stop(processes)
+    assert f"{12 - kept} runs tracked, {kept} resumed" in capsys.readouterr().out
+    assert len(list(out.rglob("*.txt"))) == 12

@@ -12,9 +12,11 @@ which saves, resumes and scores them exactly as in a local run.
 from __future__ import annotations
 
 import argparse
+import asyncio
+import logging
 import os
 from collections.abc import Iterable, Iterator
-from concurrent.futures import Executor
+from concurrent.futures import CancelledError, Executor
 from contextlib import AbstractContextManager, contextmanager, nullcontext
 from pathlib import Path
 
@@ -24,6 +26,8 @@ CONNECT_TIMEOUT_S = 30.0
 """How long to wait for the scheduler to answer and for at least one worker to join."""
 
 INSTALL_HINT = "install the cluster extra: pip install 'autotrack-studio[cluster]'"
+
+RESUME_HINT = "the runs saved so far are kept: rerun the same command to resume"
 
 
 class ClusterError(AutoTrackError):
@@ -109,16 +113,39 @@ def cluster_executor(
                 )
         executor = client.get_executor(pure=False)
         try:
-            yield executor
+            with _quiet_reconnects():
+                yield executor
         except KilledWorker as error:
             raise ClusterError(
                 f"a Dask worker died while running {error.task} (out of memory, or killed); "
-                f"the runs saved so far are kept: rerun the same command to resume"
+                f"{RESUME_HINT}"
+            ) from None
+        except (CancelledError, asyncio.CancelledError, OSError) as error:
+            # Dask cancels every pending future when the client loses its scheduler.
+            if client.status == "running" and not isinstance(error, OSError):
+                raise
+            raise ClusterError(
+                f"lost the connection to the Dask scheduler at {address} (it stopped or the "
+                f"network failed); {RESUME_HINT} once the scheduler is back"
             ) from None
         finally:
             executor.shutdown(wait=False)
     finally:
-        client.close()
+        with _quiet_reconnects():
+            client.close()
+
+
+@contextmanager
+def _quiet_reconnects() -> Iterator[None]:
+    """Keep Dask's client from logging a traceback for each failed reconnection: a lost
+    scheduler is reported once, as a ClusterError."""
+    logger = logging.getLogger("distributed.client")
+    level = logger.level
+    logger.setLevel(logging.CRITICAL)
+    try:
+        yield
+    finally:
+        logger.setLevel(level)
 
 
 def cluster_executor_for(args: argparse.Namespace) -> AbstractContextManager[Executor | None]:

@@ -295,6 +295,12 @@ class LiveLog:
             self._pending.append(frame)
             yield frame
 
+    def adopt(self, frame: CapturedFrame) -> None:
+        """Count a frame taken from the reader outside `frames()` (a preview frame the targets
+        were drawn on) as processed now; its latency includes the time spent drawing."""
+        self._pending.append(frame)
+        self.result_ready()
+
     def result_ready(self) -> CapturedFrame:
         """Mark the oldest frame handed out and not yet finished as done now; returns it."""
         frame = self._pending.pop(0)

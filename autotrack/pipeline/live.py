@@ -51,30 +51,45 @@ def run_live(
     `pose_options` go to the Pipeline (refine_params, reacquire_params).
     """
     frames = LiveFrames(describe_source(log.reader.source), fps or log.reader.fps)
-    pipeline: Pipeline | None = None
+    taken = log.frames()
+    first = next(taken, None)
+    if first is None:
+        return
+    frames.take(first)
+    pipeline = Pipeline(
+        frames,
+        params,
+        scene=scene,
+        localizer_params=localizer_params,
+        recording=recording,
+        fps=fps,
+        tracker_threads=threads,
+        **pose_options,
+    )
     try:
-        for frame in log.frames():
-            frames.take(frame)
-            if pipeline is None:
-                pipeline = Pipeline(
-                    frames,
-                    params,
-                    scene=scene,
-                    localizer_params=localizer_params,
-                    recording=recording,
-                    fps=fps,
-                    tracker_threads=threads,
-                    **pose_options,
-                )
-                start(pipeline, frame.index)
-            else:
-                pipeline.advance(frame.index)
-            outcome = pipeline.outcome(frame.index)
-            yield log.result_ready(), outcome
+        start(pipeline, first.index)
+        yield log.result_ready(), pipeline.outcome(first.index)
+        yield from follow_live(log, pipeline, frames, taken)
     finally:
         frames.close()
-        if pipeline is not None:
-            pipeline.close()
+        pipeline.close()
+
+
+def follow_live(
+    log: LiveLog,
+    pipeline: Pipeline,
+    frames: LiveFrames,
+    taken: Iterator[CapturedFrame] | None = None,
+) -> Iterator[tuple[CapturedFrame, FrameOutcome]]:
+    """Advance a pipeline whose targets are already placed (on `frames`' last taken frame)
+    over the newest frame each time it is free; each processed frame and its outcome, until
+    the source ends. `taken`: the frames to use (default `log.frames()`). Closing the
+    iterator leaves the pipeline, the frames and the reader to their owner."""
+    for frame in log.frames() if taken is None else taken:
+        frames.take(frame)
+        pipeline.advance(frame.index)
+        outcome = pipeline.outcome(frame.index)
+        yield log.result_ready(), outcome
 
 
 def track_live(
