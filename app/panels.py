@@ -18,8 +18,8 @@ import viser
 from app.boxes import format_box
 from app.config import AppConfig
 from app.controller import TabController
-from app.paths import display_name
 from app.live import DISABLED_HINT, FROZEN, OFF, PREVIEW, TRACKING, LiveControl
+from app.paths import display_name
 from autotrack.params import PRESETS
 
 NEW_TARGET = "new target"

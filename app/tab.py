@@ -21,8 +21,8 @@ from app.channel import ClientChannel
 from app.config import AppConfig
 from app.controller import TabController
 from app.display import DisplayLoop
-from app.owners import BrowserSpace
 from app.live import FROZEN, OFF, PREVIEW, LiveControl
+from app.owners import BrowserSpace
 from app.panels import (
     CANVAS_3D,
     CANVAS_FRAME,
