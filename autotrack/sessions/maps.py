@@ -78,6 +78,7 @@ class SessionMaps:
         self._channels: dict[int, TargetTopic | None] = {}
         self._spans: list[_ChunkSpan] = []
         self._last_chunk: int | None = None
+        self._previous_chunk: int | None = None
         self._decoded: OrderedDict[int, list[tuple[TargetTopic, int, bytes]]] = OrderedDict()
         self.chunks_decoded = 0
         """Chunks decompressed so far (indexing and reading)."""
@@ -119,7 +120,7 @@ class SessionMaps:
                 self._complete = True
                 break
             if opcode == Opcode.CHUNK:
-                self._last_chunk = offset
+                self._previous_chunk, self._last_chunk = self._last_chunk, offset
             elif opcode in _INDEXED:
                 handle.seek(offset)
                 self._index_record(handle, _parsed(handle.read(end - offset)))
@@ -134,7 +135,7 @@ class SessionMaps:
             self.fps = fps
         elif isinstance(record, MessageIndex) and self._last_chunk is not None and record.records:
             if record.channel_id not in self._channels:
-                self._learn_channels(handle, self._last_chunk)
+                self._learn_channels(handle, record.channel_id)
             if self._channels.get(record.channel_id) is None:
                 return
             times = [time_ns for time_ns, _ in record.records]
@@ -145,10 +146,16 @@ class SessionMaps:
             span.first_ns = min(span.first_ns, min(times))
             span.last_ns = max(span.last_ns, max(times))
 
-    def _learn_channels(self, handle: BinaryIO, offset: int) -> None:
-        for record in self._chunk(handle, offset):
-            if isinstance(record, Channel):
-                self._channels[record.id] = _map_topic(record)
+    def _learn_channels(self, handle: BinaryIO, channel_id: int) -> None:
+        """The Channel records of the chunk naming `channel_id` first: that chunk's, or the one
+        before (mcap closes a chunk that a Channel record filled before its first message)."""
+        for offset in (self._last_chunk, self._previous_chunk):
+            if offset is None or channel_id in self._channels:
+                continue
+            for record in self._chunk(handle, offset):
+                if isinstance(record, Channel):
+                    self._channels[record.id] = _map_topic(record)
+        self._channels.setdefault(channel_id, None)  # not found: never looked for again
 
     def _chunk(self, handle: BinaryIO, offset: int) -> list[Any]:
         handle.seek(offset)
