@@ -4,20 +4,30 @@ old frame's maps as recorded."""
 
 from __future__ import annotations
 
+import os
 from pathlib import Path
 
+import cv2
 import numpy as np
 import pytest
+from mcap.records import Channel, Chunk, Message
+from mcap.stream_reader import StreamReader
+from mcap.writer import Writer
 
 from app.config import AppConfig
 from app.controller import TabController
+from app.memory import release_freed_memory
 from app.recordings import RecordingRegistry
 from autotrack.errors import InputError
 from autotrack.params import preset
 from autotrack.pipeline import Pipeline, Recording
 from autotrack.result import TrackResult
 from autotrack.sessions import SessionRecorder, open_session
+from autotrack.sessions.encoding import encode_json, frame_time_ns
+from autotrack.sessions.limits import chunk_records
 from autotrack.sessions.maps import SessionMaps
+from autotrack.sessions.messages import target_messages
+from autotrack.sessions.schemas import MESSAGE_ENCODING, SCHEMA_ENCODING, schema_bytes
 from autotrack.synthetic.drift import DriftingTexture, DriftSettings
 
 DEMO = Path(__file__).resolve().parents[1] / "static" / "demo"
@@ -177,3 +187,129 @@ def test_the_app_shows_a_frame_behind_the_window_with_its_recorded_maps(tmp_path
             np.testing.assert_allclose(shown, held, atol=0.5 * np.ptp(held) / 255 + 1e-6)
         shown, held = np.log10(drawing.weights), np.log10(before.weights)
         np.testing.assert_allclose(shown, held, atol=0.5 * np.ptp(held) / 255 + 1e-5)
+
+
+def _rss_bytes() -> int:
+    with open("/proc/self/statm") as handle:
+        return int(handle.read().split()[1]) * os.sysconf("SC_PAGE_SIZE")
+
+
+SOAK_FRAMES = 3000
+SOAK_EVERY = 100
+
+
+@pytest.mark.slow
+def test_memory_stays_flat_over_3000_frames_with_four_targets_in_the_app(tmp_path) -> None:
+    """The app's controller steps a 3,000-frame sequence with four targets, recording it; RSS,
+    sampled every 100 frames, stays flat once the first map windows are full, well below what
+    keeping every map would add; an evicted frame still shows its recorded maps; closing the
+    tab gives the window's memory back."""
+    source = DriftingTexture(DriftSettings(frames=SOAK_FRAMES))
+    images = tmp_path / "drift"
+    images.mkdir()
+    for index in range(SOAK_FRAMES):
+        cv2.imwrite(str(images / f"{index + 1:05d}.jpg"), source.read_bgr(index))
+    config = AppConfig(sessions_dir=tmp_path / "sessions")  # two tracker threads, as served
+    controller = TabController(config, (tmp_path,), RecordingRegistry(), 1)
+    controller.open(images, None)
+    run = controller.run
+    for box in source.boxes(4):
+        controller.place_box(box)
+    samples: dict[int, int] = {}
+    for frame_index in range(1, SOAK_FRAMES):
+        controller.step(1)
+        if frame_index % 10 == 0:
+            controller.snapshot()  # what the display thread is handed
+        if frame_index % SOAK_EVERY == 0:
+            samples[frame_index] = _rss_bytes()
+    assert run.tracked_until == SOAK_FRAMES - 1
+    # What keeping every map would add per frame: the newest results' maps, all targets.
+    newest = [t.results[SOAK_FRAMES - 1] for t in run.targets.values()]
+    per_frame = sum(
+        m.nbytes for r in newest for m in (r.response_map, r.local_variation, r.spatial_window)
+    )
+    settled = 2 * run.map_window  # the window full, and the allocator at its working size
+    unbounded = per_frame * (SOAK_FRAMES - 1 - settled)
+    growth = max(rss for frame, rss in samples.items() if frame >= settled) - samples[settled]
+    assert unbounded > 100e6  # the test can tell: every map kept would add this much
+    assert growth < unbounded / 5, (growth / 1e6, unbounded / 1e6, samples)
+
+    controller.seek(40)  # far behind the window: its maps come from the recording
+    view = controller.snapshot()
+    recorded = SessionMaps(run.session_path)
+    for target_id, drawing in view.drawings.items():
+        maps = recorded.frame_maps(target_id, 40)
+        np.testing.assert_array_equal(drawing.result.response_map, maps.response)
+        np.testing.assert_array_equal(drawing.result.local_variation, maps.local_variation)
+    window_bytes = per_frame * run.map_window
+    del run, view, newest, drawing
+    before = _rss_bytes()
+    controller.close()
+    assert release_freed_memory()
+    assert before - _rss_bytes() > window_bytes / 2, (before / 1e6, _rss_bytes() / 1e6)
+
+
+def _write_tiny_session(path: Path, messages: list, close_chunk_before: str) -> None:
+    """(log time, topic, payload) messages, each channel registered before its first one (as
+    the recorder does), one chunk per log time; the chunk open when `close_chunk_before`'s
+    channel is registered is closed right after that Channel record, before its message."""
+    channels: dict[str, int] = {}
+    with open(path, "wb") as handle:
+        writer = Writer(handle)
+        writer.start()
+        last_time = None
+        for time_ns, topic, payload in messages:
+            if time_ns != last_time:
+                writer.flush()
+                last_time = time_ns
+            if topic.name not in channels:
+                schema = schema_bytes(topic.schema)
+                schema_id = writer.register_schema(topic.schema, SCHEMA_ENCODING, schema)
+                channels[topic.name] = writer.register_channel(
+                    topic.name, MESSAGE_ENCODING, schema_id
+                )
+                if topic.name == close_chunk_before:
+                    writer.flush()
+            writer.add_message(channels[topic.name], time_ns, encode_json(payload), 0)
+        writer.finish()
+
+
+def _channel_before_its_message(path: Path, topic_name: str) -> bool:
+    """Whether the file's Channel record for `topic_name` closes a chunk, before its message,
+    whose other messages are on channels of earlier chunks."""
+    chunks: list[list] = []
+    with open(path, "rb") as handle:
+        for record in StreamReader(handle, emit_chunks=True).records:
+            if isinstance(record, Chunk):
+                chunks.append(chunk_records(record))
+    for index, records in enumerate(chunks):
+        channels = [r for r in records if isinstance(r, Channel)]
+        ids = {r.id for r in channels if r.topic == topic_name}
+        if ids and not any(isinstance(r, Message) and r.channel_id in ids for r in records):
+            return len(channels) == 1 and index + 1 < len(chunks)
+    return False
+
+
+def test_a_channel_recorded_in_the_chunk_before_its_first_message_is_found(tmp_path) -> None:
+    """mcap closes a chunk that a Channel record filled, before the channel's first message:
+    the index looks for the channel in the chunk before too (once), and reads the maps."""
+    values = np.linspace(0.0, 1.0, 36, dtype=np.float32).reshape(6, 6)
+    box, search = (1.0, 2.0, 3.0, 4.0), (0.0, 0.0, 6.0, 6.0)
+    messages = []
+    for frame_index in range(12):  # maps on frame 11 only: their channel comes last
+        response = values if frame_index == 11 else None
+        result = TrackResult(
+            frame_index, box, 1.0, response, None, 0.1, 0.1, 0.1, False, 1.0, search
+        )
+        time_ns = frame_time_ns(frame_index, 10.0)
+        batch = target_messages(
+            time_ns, "T1", result, landmark_id=None, record_maps=True, rgba=(1.0, 0.0, 0.0, 1.0)
+        )
+        messages += [(time_ns, topic, payload) for topic, payload in batch]
+    path = tmp_path / "tiny.mcap"
+    _write_tiny_session(path, messages, "/targets/T1/response")
+    assert _channel_before_its_message(path, "/targets/T1/response")
+    maps = SessionMaps(path)
+    got = maps.frame_maps("T1", 11)
+    np.testing.assert_allclose(got.response, values, atol=0.5 / 255 + 1e-6)
+    assert got.local_variation is None and got.spatial_window is None
