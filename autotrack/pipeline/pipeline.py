@@ -441,11 +441,11 @@ class Pipeline:
         self._estimate_pose(frame_index)
 
     def _store(self, target: TrackedTarget, result: TrackResult, *, record: bool = True) -> None:
-        """Keep `result` as the target's result on its frame (and record it)."""
+        """Keep `result` as the target's result on its frame (and record it, maps included)."""
+        target.keep(result, self.map_window)
         recorder = self._recorder_or_none() if record else None
         if recorder is not None:
             recorder.log_target(target.id, result, landmark_id=target.landmark_id)
-        target.keep(result, self.map_window)
 
     # -- localisation -------------------------------------------------------------------------
 
