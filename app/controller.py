@@ -33,7 +33,7 @@ from autotrack.localization.refine import RefineParams
 from autotrack.localization.scene import Scene, load_scene
 from autotrack.params import PRESETS, preset
 from autotrack.pipeline import Pipeline, Recording, TrackedTarget
-from autotrack.sessions import open_session
+from autotrack.sessions import Session, open_session
 from autotrack.sessions.frames import EmbeddedFrames
 
 POSE_OPTIONS = {"refine_params": RefineParams(), "reacquire_params": ReacquireParams()}
@@ -117,11 +117,8 @@ class TabController:
 
     def selected_target(self) -> TrackedTarget | None:
         """The target a drag redraws, if any."""
-        return (
-            None
-            if self.run is None or self.selected is None
-            else self.run.targets.get(self.selected)
-        )
+        run, selected = self.run, self.selected
+        return None if run is None or selected is None else run.targets.get(selected)
 
     @property
     def frame_size(self) -> tuple[int, int]:
@@ -187,19 +184,27 @@ class TabController:
         """Open a sequence (and its scene: `scene_path`, else a scene.json beside it unless
         `scene_given`) with the chosen preset, closing the current run and its recording."""
         frames, scene, scene_path = self._load(path, scene_path, scene_given=scene_given)
+        run = self._new_run(frames, scene, self._recording(path, scene_path))
+        self.install_run(run, path, scene_path)
+
+    def _new_run(
+        self,
+        frames: FrameSource,
+        scene: Scene | None,
+        recording: Recording | None,
+        session: Session | None = None,
+    ) -> Pipeline:
+        """A run on `frames` with the chosen preset (or continuing `session` with its own), this
+        server's tracker threads and pose options; the frames are closed when it fails."""
+        threads = self.config.tracker_threads
+        options = {"scene": scene, "recording": recording, "tracker_threads": threads}
         try:
-            run = Pipeline(
-                frames,
-                preset(self.preset_name),
-                scene=scene,
-                recording=self._recording(path, scene_path),
-                tracker_threads=self.config.tracker_threads,
-                **POSE_OPTIONS,
-            )
+            if session is None:
+                return Pipeline(frames, preset(self.preset_name), **options, **POSE_OPTIONS)
+            return Pipeline.resume(session, frames, **options, **POSE_OPTIONS)
         except Exception:
             frames.close()
             raise
-        self.install_run(run, path, scene_path)
 
     def _load(
         self, path: Path, scene_path: Path | None, *, scene_given: bool
@@ -446,18 +451,7 @@ class TabController:
         source = self.resolve_path(session.source)
         scene_path = self.resolve_path(session.scene_path) if session.scene_path else None
         frames, scene, scene_path = self._load(source, scene_path, scene_given=True)
-        try:
-            run = Pipeline.resume(
-                session,
-                frames,
-                scene=scene,
-                recording=self._recording(source, scene_path),
-                tracker_threads=self.config.tracker_threads,
-                **POSE_OPTIONS,
-            )
-        except Exception:
-            frames.close()
-            raise
+        run = self._new_run(frames, scene, self._recording(source, scene_path), session)
         self.install_run(run, source, scene_path)
         self.cursor = run.resume_frame
         self.claim_recording()
@@ -473,15 +467,12 @@ class TabController:
         session = open_session(path)
         scene_path = session.scene_path and self.resolve_path(session.scene_path)
         scene = load_scene(scene_path) if scene_path else None
-        threads = self.config.tracker_threads
         frames = EmbeddedFrames(session)
-        run = Pipeline.resume(session, frames, scene=scene, tracker_threads=threads, **POSE_OPTIONS)
+        run = self._new_run(frames, scene, None, session)
         self.install_run(run, path, scene_path or None)
         self.cursor = run.resume_frame
-        self.message = (
-            f"Reopened {path.name}: {len(frames.recorded_indices)} frames recorded live (the "
-            f"dropped frames show the frame before them)."
-        )
+        recorded, name = len(frames.recorded_indices), path.name
+        self.message = f"Reopened {name}: {recorded} frames recorded live (dropped ones repeat)."
 
     def export(self, what: str) -> tuple[str, bytes]:
         """(file name, content) of a download: 'tracks', 'poses' or 'mcap' (app.exports)."""

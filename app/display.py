@@ -205,6 +205,7 @@ class DisplayLoop:
         """Stop the thread and remove the 3-D scene."""
         with self._lock:
             self._closed = True
+            self._view = None  # the last frame, its maps and plots: not kept past the tab
             self._lock.notify_all()
         self._thread.join(timeout=timeout)
         self.view3d.clear()

@@ -15,6 +15,7 @@ import viser
 from app.access import AccessGuard, guarded_handshakes
 from app.channel import ClientChannel, ViserClientChannel
 from app.config import AppConfig
+from app.memory import release_freed_memory
 from app.owners import BrowserSpace, browser_tag
 from app.recordings import RecordingRegistry
 from app.tab import Tab
@@ -117,12 +118,15 @@ class StudioServer:
         return tab
 
     def close_tab(self, tab_id: int) -> None:
-        """Close a tab (its browser went away), finishing its recording."""
+        """Close a tab (its browser went away), finishing its recording; the memory it held
+        goes back to the system."""
         with self._lock:
             tab = self.tabs.pop(tab_id, None)
         self.uploads.forget_tab(tab_id)
         if tab is not None:
             tab.close()
+            del tab
+            release_freed_memory()
 
     def stop(self) -> None:
         """Close every tab (finishing their recordings) and stop the server."""

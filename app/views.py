@@ -6,16 +6,22 @@ without a browser.
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, replace
 
 import numpy as np
 
 from app.canvas import TargetDrawing, target_colour
 from app.groundtruth import TruthView
+from autotrack.errors import SessionError
 from autotrack.localization.smoothing import SmootherParams, smoothed_positions
-from autotrack.pipeline import Pipeline
+from autotrack.pipeline import Pipeline, TrackedTarget
 from autotrack.result import PoseEstimate, TrackResult
+from autotrack.sessions.maps import FrameMaps
+
+RecordedMaps = Callable[[str, int], FrameMaps | None]
+"""(target id, frame) -> that target's maps on the frame as recorded (None: not at hand): where
+the maps of a frame outside the run's map window come from."""
 
 DEFAULT_FPS = 10.0
 """Frame rate the smoother assumes when the sequence has none."""
@@ -96,7 +102,9 @@ def frame_view(
 ) -> FrameView:
     """The snapshot of `run` at `frame_index` (`selected`: the target drawn thicker;
     `message`: the tab's last message, under the status line; `play_seconds`: the in-app time
-    per played frame)."""
+    per played frame). The maps of frames outside the run's map window are read back from its
+    recording."""
+    recorded = run.recorded_maps
     if play_seconds is None:
         play_seconds = np.full(run.frame_count, np.nan)
     drawings: dict[str, TargetDrawing] = {}
@@ -106,12 +114,13 @@ def frame_view(
         colour = target_colour(target.number - 1)
         colours.append(colour)
         signals[target.id] = {name: values.copy() for name, values in target.signals.items()}
-        result = target.results.get(frame_index)
+        result = with_maps(target, frame_index, recorded)
         if result is None:
             continue
         label = target.id if target.landmark_id is None else f"{target.id}:{target.landmark_id}"
-        previous = target.results.get(frame_index - 1)
-        weights_frame = trained_frame(target.results, frame_index)
+        previous = with_maps(target, frame_index - 1, recorded)
+        weights_frame = trained_frame(target, frame_index)
+        weights = None if weights_frame is None else with_maps(target, weights_frame, recorded)
         drawings[target.id] = TargetDrawing(
             label=label,
             colour=colour,
@@ -119,7 +128,7 @@ def frame_view(
             result=result,
             selected=target.id == selected,
             previous_response=None if previous is None else previous.response_map,
-            weights=None if weights_frame is None else target.results[weights_frame].spatial_window,
+            weights=None if weights is None else weights.spatial_window,
             weights_frame=weights_frame,
         )
     history = SignalHistory(
@@ -155,15 +164,40 @@ WEIGHTS_LOOKBACK = 100
 """Frames `trained_frame` looks back for the last training (aberrant frames do not train)."""
 
 
-def trained_frame(results: Mapping[int, TrackResult], frame_index: int) -> int | None:
+def trained_frame(target: TrackedTarget, frame_index: int) -> int | None:
     """The last frame at or before `frame_index` whose result carries the spatial weights the
     filter was trained with (an aberrant frame keeps the filter, and its weights, of the last
-    training), within WEIGHTS_LOOKBACK frames."""
+    training), within WEIGHTS_LOOKBACK frames. Outside the map window, where results keep no
+    maps, the frames that trained are those not aberrant."""
     for index in range(frame_index, max(-1, frame_index - WEIGHTS_LOOKBACK), -1):
-        result = results.get(index)
-        if result is not None and result.spatial_window is not None:
+        result = target.results.get(index)
+        if result is None:
+            continue
+        if result.spatial_window is not None if index >= target.maps_from else not result.aberrant:
             return index
     return None
+
+
+def with_maps(
+    target: TrackedTarget, frame_index: int, recorded: RecordedMaps | None
+) -> TrackResult | None:
+    """The target's result on `frame_index` with its maps: kept in memory inside the run's map
+    window, else read back through `recorded` (none when it has none)."""
+    result = target.results.get(frame_index)
+    if result is None or frame_index >= target.maps_from or recorded is None:
+        return result
+    try:
+        maps = recorded(target.id, frame_index)
+    except SessionError:  # the file went away or is damaged: the frame shows without maps
+        return result
+    if maps is None:
+        return result
+    return replace(
+        result,
+        response_map=maps.response,
+        local_variation=maps.local_variation,
+        spatial_window=maps.spatial_window,
+    )
 
 
 def _pose_view(run: Pipeline, frame_index: int) -> PoseView | None:

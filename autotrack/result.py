@@ -5,7 +5,7 @@
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -54,6 +54,21 @@ class TrackResult:
     def box_array(self) -> np.ndarray:
         """The box as a float64 array [x, y, w, h]."""
         return np.asarray(self.box, dtype=np.float64)
+
+    @property
+    def has_maps(self) -> bool:
+        """True when the result carries any map (response, local variation, spatial window)."""
+        return any(
+            values is not None
+            for values in (self.response_map, self.local_variation, self.spatial_window)
+        )
+
+    def without_maps(self) -> TrackResult:
+        """The same result with its maps dropped (boxes and scalar signals kept): what a long
+        run keeps of a frame outside its map window (the session recording has the maps)."""
+        if not self.has_maps:
+            return self
+        return replace(self, response_map=None, local_variation=None, spatial_window=None)
 
 
 @dataclass(frozen=True)

@@ -1,8 +1,8 @@
 """Session file size per 1,000 frames: four tracked landmarks + a camera pose every frame.
 
 Records the embedded demo (60 frames, 960x540) through the localisation pipeline three times —
-without maps, with the response and local-variation maps (the default), and with embedded
-JPEG frames — and scales the file sizes to 1,000 frames.
+without maps, with the response, local-variation and spatial-weight maps (the default), and with
+embedded JPEG frames — and scales the file sizes to 1,000 frames.
 
     python benchmarks/session_size.py
 """
@@ -36,7 +36,7 @@ def record(path: Path, **options: bool) -> int:
 def main() -> None:
     variants = {
         "boxes, signals, poses (record_maps=False)": {"record_maps": False},
-        "+ response and local-variation maps (default)": {"record_maps": True},
+        "+ response, local-variation and spatial-weight maps (default)": {"record_maps": True},
         "+ maps + embedded JPEG frames (960x540)": {"record_maps": True, "embed_frames": True},
     }
     print("size per 1,000 frames, 4 targets + pose per frame (embedded demo):")
@@ -45,7 +45,7 @@ def main() -> None:
             path = Path(folder) / f"session{index}.mcap"
             frames = record(path, **options)
             per_thousand = path.stat().st_size * 1000 / frames / 1e6
-            print(f"  {label:<48} {per_thousand:8.2f} MB")
+            print(f"  {label:<62} {per_thousand:8.2f} MB")
 
 
 if __name__ == "__main__":

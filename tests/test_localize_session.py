@@ -76,12 +76,15 @@ def test_localize_session_round_trips_to_the_same_tracks_and_poses(tmp_path, cap
 
     # Every topic the layout promises (docs/sessions.md), with one message per frame where
     # there is one per frame: response maps from frame 1, local variation from frame 2 (eq. 2
-    # needs two earlier responses), pose topics on valid frames only, one landmark scene.
+    # needs two earlier responses), the spatial weights on the frames that trained (not
+    # aberrant), pose topics on valid frames only, one landmark scene.
     counts = _topic_counts(session)
     expected = Counter({"/events": len(LANDMARKS), "/landmarks": 1})
     expected.update({topic: valid_poses for topic in ("/camera/pose", "/tf")})
     expected["/camera/pose_quality"] = FRAMES
-    for target in target_of.values():
+    for landmark, target in target_of.items():
+        trained = FRAMES - int(np.sum(columns[f"{landmark}_aberrant"]))
+        expected[f"/targets/{target}/spatial_window"] = trained
         expected[f"/targets/{target}/box"] = FRAMES
         expected[f"/targets/{target}/signals"] = FRAMES
         expected[f"/targets/{target}/response"] = FRAMES - 1

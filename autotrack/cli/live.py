@@ -138,10 +138,11 @@ def run_localize_live(
             recording=_live_recording(args, scene_path),
             fps=reader.fps or DEFAULT_FPS,
             threads=args.threads,
+            map_window=0,  # the report needs boxes and poses only: memory stays flat
             **_pose_options(args),
         )
         for _, outcome in outcomes:
-            records.append(outcome)
+            records.append(outcome.without_maps())
             progress.update()
     summary = log.summary()
     capture_times = np.array([frame.capture_time for frame in summary.processed])

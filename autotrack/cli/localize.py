@@ -220,9 +220,10 @@ def run_localize(args: argparse.Namespace) -> int:
             threads=args.threads,
             refine_params=None if args.no_refine else RefineParams(),
             reacquire_params=None if args.no_reacquire else ReacquireParams(),
+            map_window=0,  # the report needs boxes and poses only: memory stays flat
         )
         for outcome in outcomes:
-            records.append(outcome)
+            records.append(outcome.without_maps())
             progress.update()
     timestamps = np.arange(len(records)) / fps
     report = summarise(records, timestamps, scene, args.out, args.tracks, gt, frames.name)

@@ -102,7 +102,11 @@ def run(args: argparse.Namespace) -> int:
     progress = tqdm(
         total=len(frames), unit="frame", desc=frames.name, disable=args.quiet or len(frames) < 50
     )
-    with frames, progress, Pipeline(frames, preset(args.preset, args.colour_table)) as pipeline:
+    with (
+        frames,
+        progress,
+        Pipeline(frames, preset(args.preset, args.colour_table), map_window=0) as pipeline,
+    ):
         target_id = pipeline.add_target(0, tuple(init_box), landmark_id=None)
         for outcome in pipeline.run():
             boxes[outcome.frame_index] = outcome.tracks[target_id].box

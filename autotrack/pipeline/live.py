@@ -48,7 +48,7 @@ def run_live(
 
     `start(pipeline, frame_index)` adds the targets on the first frame. `fps` is the frame
     rate of the recording's log times (default: the reader's). The reader must be started.
-    `pose_options` go to the Pipeline (refine_params, reacquire_params).
+    `pose_options` go to the Pipeline (refine_params, reacquire_params, map_window).
     """
     frames = LiveFrames(describe_source(log.reader.source), fps or log.reader.fps)
     taken = log.frames()
@@ -111,7 +111,7 @@ def track_live(
         targets.append(pipeline.add_target(frame_index, box, landmark_id=None))
 
     boxes: dict[int, tuple[float, float, float, float]] = {}
-    for frame, outcome in run_live(log, params, start):
+    for frame, outcome in run_live(log, params, start, map_window=0):
         boxes[frame.index] = outcome.tracks[targets[0]].box
         if on_result is not None:
             on_result(frame, outcome)

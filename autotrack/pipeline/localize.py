@@ -32,6 +32,7 @@ def localize_sequence(
     threads: int = 1,
     refine_params: RefineParams | None = None,
     reacquire_params: ReacquireParams | None = None,
+    map_window: int = 1,
 ) -> Iterator[FrameOutcome]:
     """Track every landmark and estimate the camera pose frame by frame.
 
@@ -41,7 +42,8 @@ def localize_sequence(
     `refine_params` turns on the sub-pixel refinement of the landmark points
     (`localization.refine`), `reacquire_params` the out-of-view gate and re-acquisition of lost
     landmarks (`localization.reacquire`; it uses the refiner's templates, so it turns refinement
-    on with default settings if needed).
+    on with default settings if needed). `map_window` (the Pipeline's): 1 keeps the maps of
+    the frame yielded only, 0 none.
     """
     if not isinstance(frames, FrameSource):
         frames = InMemoryFrames(list(frames), name="frames")
@@ -56,6 +58,7 @@ def localize_sequence(
         tracker_threads=threads,
         refine_params=refine_params,
         reacquire_params=reacquire_params,
+        map_window=map_window,
     ) as pipeline:
         pipeline.add_targets(0, boxes)
         yield from pipeline.run()

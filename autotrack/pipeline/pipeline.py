@@ -35,11 +35,13 @@ from autotrack.pipeline.resume import restore
 from autotrack.pipeline.targets import (
     FrameOutcome,
     TrackedTarget,
+    check_landmark,
     free_numbers,
     grown,
 )
 from autotrack.result import PoseEstimate, TrackResult
 from autotrack.sessions import Session, SessionRecorder
+from autotrack.sessions.maps import FrameMaps, SessionMaps
 from autotrack.sessions.messages import landmark_positions
 from autotrack.tracker.tracker import validate_box
 
@@ -47,6 +49,8 @@ Box = tuple[float, float, float, float]
 
 FRAME_CACHE = 8
 """Decoded frames kept for stepping back and forth without decoding again."""
+MAP_WINDOW = 300
+"""Frames (per target, back from its newest) whose results keep their maps by default."""
 
 
 class Pipeline:
@@ -63,6 +67,9 @@ class Pipeline:
         refine_params: Sub-pixel landmark points (`localization.refine`; None: box centres).
         reacquire_params: Out-of-view gate and re-acquisition of lost landmarks
             (`localization.reacquire`; None: off). Both need a scene.
+        map_window: Frames whose results keep their response, local-variation and spatial
+            maps, back from each target's newest (older results keep boxes and signals only;
+            the recording has every map). 1: the newest only; 0: none.
     """
 
     def __init__(
@@ -77,9 +84,12 @@ class Pipeline:
         tracker_threads: int = 1,
         refine_params: RefineParams | None = None,
         reacquire_params: ReacquireParams | None = None,
+        map_window: int = MAP_WINDOW,
     ) -> None:
         if tracker_threads < 1:
             raise InputError(f"tracker threads must be at least 1, got {tracker_threads}")
+        if map_window < 0:
+            raise InputError(f"the map window must be 0 frames or more, got {map_window}")
         if scene is not None:
             scene.camera.check_image_size(*frames.frame_size)
         self.frames = frames
@@ -88,6 +98,7 @@ class Pipeline:
         self.recording = recording
         self.fps = fps if fps is not None else frames.fps
         self.frame_count = len(frames)
+        self.map_window = map_window
         self.targets: dict[str, TrackedTarget] = {}
         self.poses: dict[int, PoseEstimate] = {}
         self.frame_seconds = np.full(self.frame_count, np.nan)
@@ -104,6 +115,7 @@ class Pipeline:
         self._last_pose_frame = -1
         self._frame_cache = FrameCache(frames, FRAME_CACHE)
         self._recorder: SessionRecorder | None = None
+        self._recorded_maps: SessionMaps | None = None
         self._embedded: set[int] = set()
 
     @classmethod
@@ -158,6 +170,16 @@ class Pipeline:
         """Hand everything recorded so far to the OS (e.g. before exporting the session)."""
         if self._recorder is not None:
             self._recorder.flush()
+
+    def recorded_maps(self, target_id: str, frame_index: int) -> FrameMaps | None:
+        """A target's maps on a frame as recorded (the results outside `map_window` keep none),
+        read by frame from the session file; None when nothing is recorded."""
+        if self._recorder is None:
+            return None
+        self._recorder.flush()
+        if self._recorded_maps is None or self._recorded_maps.path != self._recorder.path:
+            self._recorded_maps = SessionMaps(self._recorder.path)
+        return self._recorded_maps.frame_maps(target_id, frame_index)
 
     def _recorder_or_none(self) -> SessionRecorder | None:
         if self._recorder is None and self.recording is not None:
@@ -233,7 +255,7 @@ class Pipeline:
         if len(set(landmarks)) != len(landmarks):
             raise InputError("each landmark can be tracked by one target only")
         for _, landmark in entries:
-            self._check_landmark(landmark, None)
+            check_landmark(self.scene, self.targets.values(), landmark, None)
         numbers = free_numbers({t.number for t in self.targets.values()}, len(entries))
         boxes = {
             f"T{number}": self._checked_box(box, frame_index)
@@ -289,7 +311,7 @@ class Pipeline:
         target = self._target(target_id)
         if target.landmark_id == landmark_id:
             return
-        self._check_landmark(landmark_id, target_id)
+        check_landmark(self.scene, self.targets.values(), landmark_id, target_id)
         if self._posing is not None:
             self._posing.landmark_changed(target_id, target.landmark_id, landmark_id)
         target.landmark_id = landmark_id
@@ -306,18 +328,6 @@ class Pipeline:
     def _check_frame(self, frame_index: int) -> None:
         if not 0 <= frame_index < self.frame_count:
             raise InputError(f"frame {frame_index} is outside 0..{self.frame_count - 1}")
-
-    def _check_landmark(self, landmark_id: str | None, target_id: str | None) -> None:
-        if landmark_id is None:
-            return
-        if self.scene is None:
-            raise InputError("no scene is loaded, so boxes cannot be tied to landmarks")
-        if landmark_id not in self.scene.landmark_ids:
-            known = ", ".join(self.scene.landmark_ids)
-            raise InputError(f"unknown landmark {landmark_id!r}; the scene has {known}")
-        for other in self.targets.values():
-            if other.id != target_id and other.landmark_id == landmark_id:
-                raise InputError(f"landmark {landmark_id} is already tracked by {other.id}")
 
     def _target(self, target_id: str) -> TrackedTarget:
         try:
@@ -431,18 +441,8 @@ class Pipeline:
         self._estimate_pose(frame_index)
 
     def _store(self, target: TrackedTarget, result: TrackResult, *, record: bool = True) -> None:
-        """Keep `result` as the target's result on its frame (and record it)."""
-        frame_index = result.frame_index
-        target.results[frame_index] = result
-        values = {
-            "peak_score": result.peak_score,
-            "global_variation": result.global_variation,
-            "theta_ref": result.theta_ref,
-            "theta": result.theta,
-            "aberrant": 1.0 if result.aberrant else 0.0,
-        }
-        for name, value in values.items():
-            target.signals[name][frame_index] = value
+        """Keep `result` as the target's result on its frame (and record it, maps included)."""
+        target.keep(result, self.map_window)
         recorder = self._recorder_or_none() if record else None
         if recorder is not None:
             recorder.log_target(target.id, result, landmark_id=target.landmark_id)

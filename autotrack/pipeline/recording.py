@@ -25,7 +25,7 @@ class Recording:
     scene_path: Path | None = None
     """The scene file, recorded in the metadata and attached."""
     record_maps: bool = True
-    """Record each target's response and local-variation maps (mono8)."""
+    """Record each target's response and local-variation maps and spatial weights (mono8)."""
     embed_frames: bool = False
     """Record every tracked frame as JPEG too (large)."""
 

@@ -2,10 +2,13 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from collections.abc import Iterable
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
+from autotrack.errors import InputError
+from autotrack.localization.scene import Scene
 from autotrack.pipeline.posing import SolverInput
 from autotrack.result import PoseEstimate, TrackResult
 
@@ -41,6 +44,9 @@ class TrackedTarget:
     """Results by 0-based frame index (the box's frame holds the init result)."""
     signals: dict[str, np.ndarray] = field(default_factory=dict)
     """Name in SIGNAL_NAMES -> float64 array over all frames, NaN where nothing is known."""
+    maps_from: int = 0
+    """The results before this frame have had their maps dropped (`keep`); the recording has
+    them."""
 
     @classmethod
     def new(
@@ -55,10 +61,33 @@ class TrackedTarget:
         """Last frame with a result (-1 before the box is drawn)."""
         return max(self.results, default=-1)
 
+    def keep(self, result: TrackResult, map_window: int) -> None:
+        """`result` as the target's result on its frame, with its signals in the arrays; the
+        maps of the results `map_window` or more frames before it are dropped (0: its own too).
+        """
+        frame_index = result.frame_index
+        self.results[frame_index] = result
+        for name in SIGNAL_NAMES:
+            self.signals[name][frame_index] = signal_value(result, name)
+        # Restarted before the window: the frames from here on are tracked afresh.
+        self.maps_from = min(self.maps_from, frame_index)
+        while self.maps_from <= frame_index - map_window:
+            kept = self.results.get(self.maps_from)
+            if kept is not None:
+                self.results[self.maps_from] = kept.without_maps()
+            self.maps_from += 1
+
     def grow(self, frame_count: int) -> None:
         """Extend the signal arrays to `frame_count` frames (NaN for the new ones)."""
         for name, values in self.signals.items():
             self.signals[name] = grown(values, frame_count)
+
+
+def signal_value(result: TrackResult, name: str) -> float:
+    """The number of `result` plotted as signal `name` (one of SIGNAL_NAMES)."""
+    if name == "aberrant":
+        return 1.0 if result.aberrant else 0.0
+    return float(getattr(result, name))
 
 
 @dataclass(frozen=True)
@@ -74,6 +103,11 @@ class FrameOutcome:
     """Camera pose (None without a scene or landmark targets)."""
     solver: SolverInput | None = None
     """What the pose solver was given (None: no pose solved on this frame)."""
+
+    def without_maps(self) -> FrameOutcome:
+        """This outcome with the results' maps dropped (what a caller keeping every frame's
+        outcome needs: boxes, signals and pose, not a few kB of maps per target and frame)."""
+        return replace(self, tracks={k: r.without_maps() for k, r in self.tracks.items()})
 
     @property
     def landmark_tracks(self) -> dict[str, TrackResult]:
@@ -105,6 +139,26 @@ class FrameOutcome:
         """Landmark id -> what happened to it beyond tracking ("out of view", "re-acquired at
         (u, v), match m")."""
         return {} if self.solver is None else dict(self.solver.events)
+
+
+def check_landmark(
+    scene: Scene | None,
+    targets: Iterable[TrackedTarget],
+    landmark_id: str | None,
+    target_id: str | None,
+) -> None:
+    """InputError unless `landmark_id` (None: no landmark) is a landmark of `scene` that no
+    target but `target_id` tracks."""
+    if landmark_id is None:
+        return
+    if scene is None:
+        raise InputError("no scene is loaded, so boxes cannot be tied to landmarks")
+    if landmark_id not in scene.landmark_ids:
+        known = ", ".join(scene.landmark_ids)
+        raise InputError(f"unknown landmark {landmark_id!r}; the scene has {known}")
+    for other in targets:
+        if other.id != target_id and other.landmark_id == landmark_id:
+            raise InputError(f"landmark {landmark_id} is already tracked by {other.id}")
 
 
 def number_of(target_id: str, fallback: int) -> int:

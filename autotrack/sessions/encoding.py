@@ -14,6 +14,8 @@ from typing import Any
 import numpy as np
 
 from autotrack.errors import SessionError
+from autotrack.result import TrackResult
+from autotrack.sessions.schemas import TargetStream
 
 FORMAT_VERSION = 1
 """Version of the session layout this package writes and the newest it reads."""
@@ -53,6 +55,36 @@ def dequantise_map(quantised: np.ndarray, lo: float, hi: float) -> np.ndarray:
     """Inverse of `quantise_map` (to within (hi - lo) / 510): v = lo + q / 255 * (hi - lo)."""
     q = np.asarray(quantised, dtype=np.float32)
     return (np.float32(lo) + q / np.float32(255.0) * np.float32(hi - lo)).astype(np.float32)
+
+
+MAP_STREAMS = (TargetStream.RESPONSE, TargetStream.LOCAL_VARIATION, TargetStream.SPATIAL_WINDOW)
+"""A target's map streams, in the order they are recorded."""
+RANGE_FIELDS = {stream: f"{stream.value}_range" for stream in MAP_STREAMS}
+"""Map stream -> the signals field holding its quantisation range [lo, hi]."""
+
+
+def map_of(result: TrackResult, stream: TargetStream) -> np.ndarray | None:
+    """The map of `result` a map stream records, as quantised: the spatial weights in log10
+    (they span decades, and the app shows them so); None when the result has none."""
+    if stream is TargetStream.RESPONSE:
+        return result.response_map
+    if stream is TargetStream.LOCAL_VARIATION:
+        return result.local_variation
+    weights = result.spatial_window
+    if weights is None:
+        return None
+    positive = np.asarray(weights, dtype=np.float64)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        return np.log10(np.where(positive > 0, positive, np.nan))
+
+
+def recorded_map(stream: TargetStream, quantised: np.ndarray, lo: float, hi: float) -> np.ndarray:
+    """The float32 map a map stream's mono8 image and range stand for (inverse of `map_of`
+    and `quantise_map`)."""
+    values = dequantise_map(quantised, lo, hi)
+    if stream is TargetStream.SPATIAL_WINDOW:
+        return np.power(np.float32(10.0), values).astype(np.float32)
+    return values
 
 
 def finite_or_none(value: Any) -> float | None:

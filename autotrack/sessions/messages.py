@@ -17,7 +17,14 @@ import numpy as np
 from autotrack.errors import SessionError
 from autotrack.io.ids import checked_identifier
 from autotrack.result import TrackResult
-from autotrack.sessions.encoding import box_list, finite_or_none, jsonable, quantise_map
+from autotrack.sessions.encoding import (
+    MAP_STREAMS,
+    box_list,
+    finite_or_none,
+    jsonable,
+    map_of,
+    quantise_map,
+)
 from autotrack.sessions.schemas import (
     CAMERA_FRAME,
     WORLD_FRAME,
@@ -219,18 +226,14 @@ def target_messages(
     rgba: Rgba,
 ) -> list[Message]:
     """One target in one frame: its signals, its box (when finite, outlined in `rgba`) and,
-    with `record_maps`, the response and local-variation maps quantised to mono8."""
+    with `record_maps`, the response and local-variation maps and the spatial weights (in
+    log10) quantised to mono8."""
     box = box_list(result.box)
-    ranges: dict[TargetStream, list[float | None] | None] = {
-        TargetStream.RESPONSE: None,
-        TargetStream.LOCAL_VARIATION: None,
-    }
+    ranges: dict[TargetStream, list[float | None] | None] = dict.fromkeys(MAP_STREAMS)
     maps: list[Message] = []
     if record_maps:
-        for stream, values in (
-            (TargetStream.RESPONSE, result.response_map),
-            (TargetStream.LOCAL_VARIATION, result.local_variation),
-        ):
+        for stream in MAP_STREAMS:
+            values = map_of(result, stream)
             if values is None:
                 continue
             quantised, lo, hi = quantise_map(values)
@@ -252,6 +255,7 @@ def target_messages(
         "landmark_id": None if landmark_id is None else str(landmark_id),
         "response_range": ranges[TargetStream.RESPONSE],
         "local_variation_range": ranges[TargetStream.LOCAL_VARIATION],
+        "spatial_window_range": ranges[TargetStream.SPATIAL_WINDOW],
     }
     batch: list[Message] = [(TargetTopic(target_id, TargetStream.SIGNALS).topic, signals)]
     if all(math.isfinite(v) for v in box):

@@ -159,7 +159,7 @@ class _SessionBuilder:
             raise SessionError(f"target id {target.target_id!r} holds control characters")
         if target.stream is TargetStream.SIGNALS:
             self._add_signals(target.target_id, json.loads(message.data))
-        elif target.stream is not TargetStream.BOX and self.load_maps:
+        elif target.stream.value in self.maps and self.load_maps:
             image = json.loads(message.data)
             pixels = np.frombuffer(base64.b64decode(image["data"]), dtype=np.uint8)
             pixels = pixels.reshape(int(image["height"]), int(image["step"]))

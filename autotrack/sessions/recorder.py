@@ -101,7 +101,8 @@ class SessionRecorder:
         scene_path: localisation scene file; recorded by name and embedded as an attachment.
         fps: frame rate of the source; log times are frame_index / fps (DEFAULT_FPS if None).
         embed_frames: record the video frames as JPEG (`log_frame`); large, off by default.
-        record_maps: record the response and local-variation maps (mono8, ~2.5 kB each).
+        record_maps: record the response and local-variation maps and the spatial weights
+            (log10), mono8, ~2.5 kB each.
         jpeg_quality: JPEG quality of embedded frames (0-100).
         flush_interval: longest time (s) a message waits in memory before reaching the OS.
         fsync: also fsync the file at each flush (survives power loss, slower).
@@ -201,7 +202,7 @@ class SessionRecorder:
     def log_target(
         self, target_id: str, result: TrackResult, *, landmark_id: str | None = None
     ) -> None:
-        """Record one target in one frame: box, signals and (if record_maps) the two maps."""
+        """Record one target in one frame: box, signals and (if record_maps) its maps."""
         target_id = check_target_id(target_id)
         check_landmark_id(landmark_id)
         rgba = _ABERRANT_RGBA

@@ -91,6 +91,8 @@ class TargetStream(StrEnum):
     SIGNALS = "signals"
     RESPONSE = "response"
     LOCAL_VARIATION = "local_variation"
+    SPATIAL_WINDOW = "spatial_window"
+    """The spatial regularisation weights the filter was trained with, quantised in log10."""
 
     @property
     def schema(self) -> str:
