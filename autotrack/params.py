@@ -120,6 +120,16 @@ class TrackerParams:
     scale_model_min_side: float = 0.0
     """Smallest side (pixels) of a resampled scale sample; 0 = the release's (area <= 512 only).
     16 px = four fHOG cells, so a thin target keeps interior cells across its short side."""
+    velocity_weight: float = 0.0
+    """Search centred at the last position plus this fraction of the last confident frame's
+    motion (a constant-velocity prediction); 0 = the release (the last position). 1: constant
+    velocity. Measured, not in `autotrack+` (docs/tracker.md)."""
+    num_aspects: int = 0
+    """Width / height ratios sampled by the aspect filter (aspect.AspectFilter: DSST's scale
+    filter along the other axis of the (width, height) scale space), `scale_step` apart; 0 = the
+    release's fixed aspect. 17 = +-8 steps of 3 %: +-27 % per frame, the reach per frame of the
+    33-scale filter's +-16 steps halved, since a turning target changes shape more slowly than
+    the camera's zoom changes its size. Measured, not in `autotrack+` (docs/tracker.md)."""
 
     def __post_init__(self) -> None:
         from autotrack.errors import InputError
@@ -137,6 +147,8 @@ class TrackerParams:
             problems.append("num_scales must be >= 1 and scale_step > 1")
         if not 0 < self.variation_floor <= 1 or not 0 < self.confidence_memory <= 1:
             problems.append("variation_floor and confidence_memory must be in (0, 1]")
+        if self.num_aspects < 0 or self.velocity_weight < 0:
+            problems.append("num_aspects and velocity_weight must be >= 0")
         if self.confidence_gate < 0 or self.redetect_span < 0 or self.scale_model_min_side < 0:
             problems.append("confidence_gate, redetect_span, scale_model_min_side must be >= 0")
         if self.redetect_span and not (self.redetect_span > 1 and self.confidence_gate > 0):
@@ -176,6 +188,8 @@ class TrackerParams:
             or self.confidence_gate
             or self.redetect_span
             or self.scale_model_min_side
+            or self.num_aspects
+            or self.velocity_weight
         )
 
     def with_colour_table(self, path: str | Path | None) -> TrackerParams:

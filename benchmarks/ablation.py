@@ -17,6 +17,7 @@ import os
 import time
 from concurrent.futures import ProcessPoolExecutor, as_completed
 from dataclasses import replace
+from multiprocessing import get_context
 from pathlib import Path
 
 import numpy as np
@@ -47,6 +48,8 @@ ABLATION: dict[str, dict] = {
         "redetect_span": PRESETS[PLUS].redetect_span,
     },
     "+ thin-target scale model": {"scale_model_min_side": PRESETS[PLUS].scale_model_min_side},
+    "+ aspect filter": {"num_aspects": 17},
+    "+ velocity prediction": {"velocity_weight": 1.0},
 }
 """Each change of `autotrack+` on its own on top of the faithful preset (the acting ASR needs the
 bounded variation, re-detection needs the gate), as Table 2 adds ASR and ATR to STRCF."""
@@ -61,6 +64,13 @@ SENSITIVE = (
 )
 """The parameters `autotrack+` uses or adds (delta is the release's, but it acts only here)."""
 
+CANDIDATES: dict[str, dict] = {
+    f"{PLUS} + aspect filter": ABLATION["+ aspect filter"],
+    f"{PLUS} + velocity prediction": ABLATION["+ velocity prediction"],
+}
+"""Switches measured on top of `autotrack+` but left out of the preset (docs/benchmarks.md);
+their parameters' sensitivity is taken around these variants."""
+
 
 def plus_overrides() -> dict:
     """`autotrack+` as overrides of the faithful preset."""
@@ -74,6 +84,9 @@ def plus_overrides() -> dict:
 
 WITHOUT_ASR = f"{PLUS} without acting ASR"
 """Leave-one-out of the change whose effect on the mean is smallest and least certain."""
+WITHOUT_VARIATION = f"{PLUS} without robust variation and acting ASR"
+"""Leave-one-out of the two changes to the release's regularisation (the acting ASR needs the
+bounded variation): the gate, re-detection and the scale model on the release's ASR and ATR."""
 
 
 def variants(sensitivity: bool) -> dict[str, dict]:
@@ -81,12 +94,23 @@ def variants(sensitivity: bool) -> dict[str, dict]:
     table = dict(ABLATION)
     table[PLUS] = plus_overrides()
     table[WITHOUT_ASR] = {**plus_overrides(), "acting_asr": False}
+    table[WITHOUT_VARIATION] = {**plus_overrides(), "acting_asr": False, "robust_variation": False}
+    for label, extra in CANDIDATES.items():
+        table[label] = {**plus_overrides(), **extra}
     if sensitivity:
-        for name in SENSITIVE:
-            value = getattr(PRESETS[PLUS], name)
+        for base, name, value in sensitivity_bases():
             for factor in (0.5, 2.0):
-                table[f"{PLUS} {name} x{factor:g}"] = {**plus_overrides(), name: value * factor}
+                changed = type(value)(value * factor)  # an int parameter stays an int
+                table[f"{PLUS} {name} x{factor:g}"] = {**table[base], name: changed}
     return table
+
+
+def sensitivity_bases() -> list[tuple[str, str, float]]:
+    """(variant perturbed, parameter, its value there) for every sensitivity row."""
+    rows = [(PLUS, name, getattr(PRESETS[PLUS], name)) for name in SENSITIVE]
+    for label, extra in CANDIDATES.items():
+        rows += [(label, name, value) for name, value in extra.items()]
+    return rows
 
 
 def slug(overrides: dict) -> str:
@@ -149,10 +173,13 @@ def run_all(
         return {k: v for k, v in results.items() if len(v) == len(sequences)}
     # The faithful preset and autotrack+ first, then the ablation rows, CSRT, and the
     # sensitivity runs; within a variant the longest sequences first (balances the pool).
-    priority = [FAITHFUL, PLUS, *ABLATION, WITHOUT_ASR, "csrt", *folders]
+    priority = [FAITHFUL, PLUS, *ABLATION, WITHOUT_ASR, WITHOUT_VARIATION, *CANDIDATES, "csrt"]
+    priority += list(folders)
     todo.sort(key=lambda item: (priority.index(item[0]), -len(item[2])))
     os.environ.update(SINGLE_THREAD_ENVIRONMENT)
-    with ProcessPoolExecutor(max_workers=max(jobs, 1)) as pool:
+    # Spawned workers read the one-thread environment when they import numba; forked ones keep
+    # the parent's thread count and fail when a kernel is compiled (a cold numba cache).
+    with ProcessPoolExecutor(max_workers=max(jobs, 1), mp_context=get_context("spawn")) as pool:
         futures = {
             pool.submit(
                 _task, "csrt" if label == "csrt" else "autotrack", table.get(label, {}), sequence
@@ -210,7 +237,7 @@ def build_tables(sequences, results: dict, table: dict[str, dict]) -> str:
         "|---|---|---|---|---|---|---|",
     ]
     base_p, base_auc = _mean(faithful, names)
-    order = [*ABLATION, PLUS, WITHOUT_ASR, "csrt"]
+    order = [*ABLATION, PLUS, WITHOUT_ASR, WITHOUT_VARIATION, *CANDIDATES, "csrt"]
     labels = [label for label in order if label in results]
     for label in labels:
         p, a = _mean(scores[label], names)
@@ -237,8 +264,11 @@ def build_tables(sequences, results: dict, table: dict[str, dict]) -> str:
     columns = [label for label in labels if label != "csrt"]
     short = dict(
         zip(
-            [*ABLATION, PLUS, WITHOUT_ASR],
-            ["faithful", "+RV", "+RV+ASR", "+gate", "+gate+redet", "+scale", PLUS, "+ no ASR"],
+            [*ABLATION, PLUS, WITHOUT_ASR, WITHOUT_VARIATION, *CANDIDATES],
+            [
+                *("faithful", "+RV", "+RV+ASR", "+gate", "+gate+redet", "+scale", "+aspect"),
+                *("+velocity", PLUS, "+ no ASR", "+ no RV/ASR", "+ + aspect", "+ + velocity"),
+            ],
             strict=True,
         )
     )
@@ -253,18 +283,27 @@ def build_tables(sequences, results: dict, table: dict[str, dict]) -> str:
         )
         cells.append(f"{scores['csrt'][n].precision:.3f} / {scores['csrt'][n].auc:.3f}")
         lines.append(f"| {sequence.dataset}/{n} | " + " | ".join(cells) + " |")
+    lines += _sensitivity_lines(results, scores, names)
+    return "\n".join(lines)
+
+
+def _sensitivity_lines(results: dict, scores: dict, names: list[str]) -> list[str]:
+    """The sensitivity table: each parameter halved and doubled around its variant."""
+    lines: list[str] = []
     sensitivity = [label for label in results if label.startswith(f"{PLUS} ") and " x" in label]
     if sensitivity:
-        plus_p, plus_a = _mean(scores[PLUS], names)
         lines += [
             "",
-            f"Sensitivity: mean P@20 / AUC of {PLUS} ({plus_p:.3f} / {plus_a:.3f}) with one "
-            "parameter halved or doubled.",
+            "Sensitivity: mean P@20 / AUC of a variant with one parameter halved or doubled "
+            "(an integer rounded down), and the change from the variant.",
             "",
-            "| parameter | default | x0.5 | x2 |",
-            "|---|---|---|---|",
+            "| variant | parameter | value | mean there | x0.5 | x2 |",
+            "|---|---|---|---|---|---|",
         ]
-        for name in SENSITIVE:
+        for base, name, value in sensitivity_bases():
+            if base not in scores:
+                continue
+            base_p, base_a = _mean(scores[base], names)
             cells = []
             for factor in (0.5, 2.0):
                 label = f"{PLUS} {name} x{factor:g}"
@@ -272,10 +311,13 @@ def build_tables(sequences, results: dict, table: dict[str, dict]) -> str:
                     cells.append("not run")
                     continue
                 p, a = _mean(scores[label], names)
-                cells.append(f"{p:.3f} / {a:.3f} ({p - plus_p:+.3f} / {a - plus_a:+.3f})")
-            default = getattr(PRESETS[PLUS], name)
-            lines.append(f"| `{name}` | {default:g} | " + " | ".join(cells) + " |")
-    return "\n".join(lines)
+                cells.append(f"{p:.3f} / {a:.3f} ({p - base_p:+.3f} / {a - base_a:+.3f})")
+            lines.append(
+                f"| {base} | `{name}` | {value:g} | {base_p:.3f} / {base_a:.3f} | "
+                + " | ".join(cells)
+                + " |"
+            )
+    return lines
 
 
 def update_doc(tables: str) -> None:

@@ -42,8 +42,12 @@ def moving_target_sequence(
     final_scale: float = 1.3,
     occlusion: tuple[int, int] | None = None,
     seed: int = 7,
+    final_aspect: float = 1.0,
 ) -> GeneratedSequence:
     """A target moving on a smooth path and growing to `final_scale` over static clutter.
+
+    With `final_aspect` != 1 the target's width / height ratio moves steadily to it at constant
+    area (a stretching target: width * sqrt(aspect), height / sqrt(aspect)).
 
     With `occlusion=(first, last)`, those frames show a flat grey block over the whole search
     region around the target (a full occlusion).
@@ -57,11 +61,16 @@ def moving_target_sequence(
         phase = index / max(num_frames - 1, 1)
         scale = 1.0 + (final_scale - 1.0) * phase
         side = target_size * scale
+        stretch = final_aspect ** (0.5 * phase)
+        side_w, side_h = side * stretch, side / stretch
         cx = width * 0.3 + width * 0.4 * phase + 12 * np.sin(4 * np.pi * phase)
         cy = height * 0.5 + height * 0.15 * np.sin(2 * np.pi * phase)
-        zoom = side / texture.shape[0]
+        zoom_w, zoom_h = side_w / texture.shape[1], side_h / texture.shape[0]
         warp = np.array(
-            [[zoom, 0, cx - side / 2 - 0.5 + zoom / 2], [0, zoom, cy - side / 2 - 0.5 + zoom / 2]],
+            [
+                [zoom_w, 0, cx - side_w / 2 - 0.5 + zoom_w / 2],
+                [0, zoom_h, cy - side_h / 2 - 0.5 + zoom_h / 2],
+            ],
             dtype=np.float64,
         )
         layer = cv2.warpAffine(texture, warp, (width, height), flags=cv2.INTER_LINEAR)
@@ -74,5 +83,30 @@ def moving_target_sequence(
             top, left = int(cy) - half, int(cx) - half
             frame[max(top, 0) : top + 2 * half, max(left, 0) : left + 2 * half] = 128.0
         frames.append(np.clip(frame, 0, 255).astype(np.uint8))
-        boxes.append((cx - side / 2, cy - side / 2, side, side))
+        boxes.append((cx - side_w / 2, cy - side_h / 2, side_w, side_h))
     return GeneratedSequence(frames=frames, boxes=np.array(boxes))
+
+
+def accelerating_target_sequence(
+    num_frames: int = 24,
+    size_hw: tuple[int, int] = (200, 1280),
+    target_size: int = 32,
+    final_speed: float = 90.0,
+    seed: int = 11,
+) -> GeneratedSequence:
+    """A target crossing the frame left to right, its speed rising steadily from 0 to
+    `final_speed` pixels per frame (fast motion that a constant-velocity prediction follows)."""
+    rng = np.random.default_rng(seed)
+    height, width = size_hw
+    background = _clutter(rng, height, width)
+    texture = _target_texture(rng, target_size)
+    frames, boxes = [], []
+    x, cy = 40.0, height / 2.0
+    for index in range(num_frames):
+        x += final_speed * index / max(num_frames - 1, 1)
+        frame = background.copy()
+        left, top = int(round(x - target_size / 2)), int(round(cy - target_size / 2))
+        frame[top : top + target_size, left : left + target_size] = texture
+        frames.append(np.clip(frame, 0, 255).astype(np.uint8))
+        boxes.append((left, top, target_size, target_size))
+    return GeneratedSequence(frames=frames, boxes=np.array(boxes, dtype=np.float64))

@@ -94,11 +94,22 @@ def scale_patches(
     factors = np.asarray(scale_factors, dtype=np.float64)
     base = np.asarray(base_target_size_hw, dtype=np.float64)
     sizes = np.maximum(np.floor(base[None, :] * factors[:, None]), 2).astype(np.int64)
+    return sized_patches(image, position, sizes, model_size_hw)
+
+
+def sized_patches(
+    image: np.ndarray,
+    position: tuple[float, float],
+    sizes: np.ndarray,
+    model_size_hw: tuple[int, int],
+) -> np.ndarray:
+    """Patches of the given (N, 2) integer (rows, cols) sizes centred on `position`, each resized
+    to the model size: (N, rows, cols[, 3]), as `scale_patches` (which calls this) describes."""
     model = (int(model_size_hw[0]), int(model_size_hw[1]))
     generic = area_paths_are_generic(sizes, model)
     tops = math.floor(position[0]) - sizes[:, 0] // 2
     lefts = math.floor(position[1]) - sizes[:, 1] // 2
-    samples = np.empty((len(factors), *model, *image.shape[2:]), np.uint8)
+    samples = np.empty((len(sizes), *model, *image.shape[2:]), np.uint8)
     if generic.any():
         samples[generic] = area_resize_crops(
             image, tops[generic], lefts[generic], sizes[generic], model

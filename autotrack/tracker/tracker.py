@@ -18,6 +18,7 @@ from autotrack.errors import BoxError, InputError
 from autotrack.params import TrackerParams
 from autotrack.result import TrackResult
 from autotrack.tracker import dcf, redetect, regularization, robust
+from autotrack.tracker.aspect import AspectFilter
 from autotrack.tracker.features import extract_features, feature_dim, is_grey, load_colour_table
 from autotrack.tracker.sampling import search_patch
 from autotrack.tracker.scale import ScaleFilter
@@ -143,11 +144,13 @@ class AutoTrack:
         self.filter_f = np.zeros_like(xf)
         self.filter_f, theta = self._train(xf, theta_start=0.0, theta_ref=0.0)
         self.scale_filter.update(image, self.position, self.scale, best=None)
+        self.aspect_filter = self._start_aspect_filter(image)
         self.confidence = (
             robust.ResponseConfidence(p.confidence_memory) if p.confidence_gate > 0 else None
         )
         self.previous_response: np.ndarray | None = None
         self.previous_displacement = (0.0, 0.0)
+        self.velocity = np.zeros(2)
         result = TrackResult(
             frame_index=0,
             box=self._box(),
@@ -180,6 +183,9 @@ class AutoTrack:
         image = self._prepare(image)
         p = self.params
         self.frame_number += 1
+        start = self.position
+        if p.velocity_weight:
+            self.position = self._predicted_position()
         search_box = self._search_box()
 
         # Detection (eq. 16) and the sub-pixel peak.
@@ -192,6 +198,7 @@ class AutoTrack:
             if found is not None:
                 zf, response, (disp_row, disp_col, peak_score), search_box = found
                 confident = True
+                start = None  # a jump, not a motion to extrapolate
         if self.confidence is not None:
             self.confidence.observe(peak_score, robust.apce(response), p.confidence_gate)
 
@@ -204,9 +211,13 @@ class AutoTrack:
         best_scale = None
         translation = dcf.matlab_round(np.array([disp_row, disp_col]) * p.cell_size * self.scale)
         self.position = self.position + translation
+        self.velocity = (
+            self.position - start if confident and start is not None else 0.0 * translation
+        )
         # A low-confidence frame (occluder, loss) changes neither the filter nor the scale.
         if confident:
             best_scale, self.scale = self.scale_filter.detect(image, self.position, self.scale)
+            self._detect_aspect(image)
 
         # Train on the detection features moved to the new position (release's reuse).
         theta = float("nan")
@@ -217,6 +228,8 @@ class AutoTrack:
             self.filter_f, theta = self._train(xf, theta_start, theta_ref)
         if confident:
             self.scale_filter.update(image, self.position, self.scale, best_scale)
+            if self.aspect_filter is not None:
+                self.aspect_filter.update(image, self.position, self._box_size_hw())
 
         result = TrackResult(
             frame_index=self.frame_number - 1,
@@ -352,8 +365,47 @@ class AutoTrack:
             update,
         )
 
+    def _predicted_position(self) -> np.ndarray:
+        """Last position plus velocity_weight x the last confident frame's motion, in the image."""
+        height, width = self.image_size_hw
+        moved = self.position + dcf.matlab_round(self.params.velocity_weight * self.velocity)
+        return np.clip(moved, 1.0, [float(height), float(width)])
+
+    def _start_aspect_filter(self, image: np.ndarray) -> AspectFilter | None:
+        """The aspect filter (num_aspects > 0) learnt on the first frame, on the scale filter's
+        model size and its step, label width, regulariser and learning rate."""
+        p = self.params
+        if not p.num_aspects:
+            return None
+        self.aspect_filter = None  # _box_size_hw: the first frame's shape
+        aspect = AspectFilter(
+            p.num_aspects,
+            p.scale_step,
+            p.scale_sigma_factor,
+            p.scale_lambda,
+            p.scale_learning_rate,
+            self.scale_filter.model_size_hw,
+        )
+        aspect.update(image, self.position, self._box_size_hw())
+        return aspect
+
+    def _detect_aspect(self, image: np.ndarray) -> None:
+        """Aspect search at the new scale (aspect.py); the scale filter then samples that shape."""
+        if self.aspect_filter is None:
+            return
+        self.aspect_filter.detect(image, self.position, self._box_size_hw())
+        shape = self.base_target_size * self.aspect_filter.size_factors()
+        self.scale_filter.base_target_size_hw = shape
+
+    def _box_size_hw(self) -> np.ndarray:
+        """(height, width) of the target at the current scale and aspect, unrounded."""
+        size = self.base_target_size * self.scale
+        if self.aspect_filter is not None:
+            size = size * self.aspect_filter.size_factors()
+        return size
+
     def _target_size(self) -> np.ndarray:
-        return dcf.matlab_round(self.base_target_size * self.scale)
+        return dcf.matlab_round(self._box_size_hw())
 
     def _box(self) -> tuple[float, float, float, float]:
         height, width = self._target_size()
