@@ -464,7 +464,9 @@ def test_a_live_source_is_tracked_in_chromium(live_studio, tmp_path: Path) -> No
             assert tab.wait_idle()
             assert "recorded to" in controller.message
             page.screenshot(path=str(ARTIFACTS / "app-live-stopped.png"))
-            session = open_session(next((tmp_path / "sessions").glob("*.mcap")))
+            session = open_session(
+                next((tmp_path / "sessions").rglob("*.mcap"))
+            )  # in the browser's own folder
             assert session.image_count >= figures.processed + 1  # the frozen frame too
             recorded = controller.run.frames.recorded_indices
             assert recorded[0] == frozen and len(recorded) == session.image_count
