@@ -56,10 +56,9 @@ def truth_view(truth: np.ndarray, frame_index: int, target: TrackedTarget | None
     errors, ious = np.full(count, np.nan), np.full(count, np.nan)
     if target is None or not target.results:
         return TruthView(box, None, errors, ious, None, np.nan, np.nan)
-    first, last = min(target.results), max(target.results)
+    first, last = target.results.first_frame, target.results.last_frame
     pred = np.full((last - first + 1, 4), np.nan)
-    for index, result in target.results.items():
-        pred[index - first] = result.box
+    pred[target.results.frames - first] = target.results.boxes
     gt = truth[first : last + 1]
     errors[first : last + 1] = center_errors(pred, gt)
     ious[first : last + 1] = overlaps(pred, gt)

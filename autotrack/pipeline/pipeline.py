@@ -385,7 +385,9 @@ class Pipeline:
     def run(self) -> Iterator[FrameOutcome]:
         """Every frame's outcome from the first frame with a result to the last, tracking the
         frames not tracked yet on the way."""
-        first = min((min(t.results) for t in self.targets.values() if t.results), default=None)
+        first = min(
+            (t.results.first_frame for t in self.targets.values() if t.results), default=None
+        )
         if first is None:
             raise InputError("no targets to track: add a box first")
         for frame_index in range(first, self.frame_count):
@@ -426,14 +428,11 @@ class Pipeline:
         """`result` becomes the target's result on its frame; its later results are dropped."""
         frame_index = result.frame_index
         recorder = self._recorder_or_none()
-        for later in [index for index in target.results if index > frame_index]:
-            del target.results[later]
+        for later in target.truncate_after(frame_index):
             if recorder is not None:
                 # The recording keeps the latest record per frame: this one says the target has
                 # no result there any more (until it is tracked again).
                 recorder.log_no_result(target.id, later, landmark_id=target.landmark_id)
-        for values in target.signals.values():
-            values[frame_index:] = np.nan
         if self._posing is not None:
             self._posing.drop_points(target.id, frame_index + 1)
         self._store(target, result)

@@ -9,6 +9,7 @@ import numpy as np
 
 from autotrack.errors import InputError
 from autotrack.localization.scene import Scene
+from autotrack.pipeline.history import ResultHistory
 from autotrack.pipeline.posing import SolverInput
 from autotrack.result import PoseEstimate, TrackResult
 
@@ -40,13 +41,11 @@ class TrackedTarget:
     """1, 2, ...: the number in the id."""
     landmark_id: str | None
     """Scene landmark this target localises (None: tracked only)."""
-    results: dict[int, TrackResult] = field(default_factory=dict)
-    """Results by 0-based frame index (the box's frame holds the init result)."""
+    results: ResultHistory = field(default_factory=ResultHistory)
+    """Results by 0-based frame index (the box's frame holds the init result), as columns; the
+    recent map window's results kept whole."""
     signals: dict[str, np.ndarray] = field(default_factory=dict)
     """Name in SIGNAL_NAMES -> float64 array over all frames, NaN where nothing is known."""
-    maps_from: int = 0
-    """The results before this frame have had their maps dropped (`keep`); the recording has
-    them."""
 
     @classmethod
     def new(
@@ -59,23 +58,27 @@ class TrackedTarget:
     @property
     def last_frame(self) -> int:
         """Last frame with a result (-1 before the box is drawn)."""
-        return max(self.results, default=-1)
+        return self.results.last_frame
+
+    @property
+    def maps_from(self) -> int:
+        """The results before this frame have had their maps dropped (`keep`); the recording
+        has them."""
+        return self.results.maps_from
 
     def keep(self, result: TrackResult, map_window: int) -> None:
         """`result` as the target's result on its frame, with its signals in the arrays; the
         maps of the results `map_window` or more frames before it are dropped (0: its own too).
         """
-        frame_index = result.frame_index
-        self.results[frame_index] = result
+        self.results.put(result, map_window)
         for name in SIGNAL_NAMES:
-            self.signals[name][frame_index] = signal_value(result, name)
-        # Restarted before the window: the frames from here on are tracked afresh.
-        self.maps_from = min(self.maps_from, frame_index)
-        while self.maps_from <= frame_index - map_window:
-            kept = self.results.get(self.maps_from)
-            if kept is not None:
-                self.results[self.maps_from] = kept.without_maps()
-            self.maps_from += 1
+            self.signals[name][result.frame_index] = signal_value(result, name)
+
+    def truncate_after(self, frame_index: int) -> list[int]:
+        """Drop the results and signals after `frame_index`; the frames dropped, in order."""
+        for values in self.signals.values():
+            values[frame_index + 1 :] = np.nan
+        return self.results.truncate_after(frame_index)
 
     def grow(self, frame_count: int) -> None:
         """Extend the signal arrays to `frame_count` frames (NaN for the new ones)."""
