@@ -2,7 +2,8 @@
 
 Runs a generated drifting-texture sequence (`autotrack.synthetic.drift`, 160x120, the default
 tracker) through one of two drivers and prints the process's RSS every 250 frames, its peak,
-its growth after the first map window, and (app) after the tab is closed:
+its growth after the first map windows (in all and per 1,000 frames), and (app) after the tab
+is closed:
 
 - `localize`: the pipeline as `autotrack localize` / `track` drive it (every frame's outcome
   kept for the report, maps dropped; `Pipeline(map_window=0)`);
@@ -15,6 +16,9 @@ Each measurement runs in a fresh process:
 
     python benchmarks/memory.py localize [--keep-all-maps] [--frames 3000]
     python benchmarks/memory.py app [--keep-all-maps] [--frames 3000]
+
+`--trace` also lists, with tracemalloc, the allocation sites that grew after the first windows
+(what is still kept per frame).
 """
 
 from __future__ import annotations
@@ -23,6 +27,7 @@ import argparse
 import os
 import tempfile
 import time
+import tracemalloc
 from pathlib import Path
 
 import cv2
@@ -47,27 +52,59 @@ def rss_mb() -> float:
 class Samples:
     """RSS along the run."""
 
-    def __init__(self) -> None:
+    def __init__(self, trace: bool = False) -> None:
         self.rows: list[tuple[int, float]] = []
         self.started = time.process_time()
+        self.traced = Traced(trace)
 
     def take(self, frame_index: int) -> None:
+        self.traced.take(frame_index)
         self.rows.append((frame_index, rss_mb()))
         print(f"  frame {frame_index:5d}: RSS {self.rows[-1][1]:7.1f} MB", flush=True)
 
     def report(self) -> None:
-        """Peak RSS, and the growth from the first sample at or after SETTLED to the last."""
+        """Peak RSS, and the growth from the first sample at or after SETTLED to the last (in
+        all and per 1,000 frames)."""
         peak = max(rss for _, rss in self.rows)
         frame, settled = next((f, rss) for f, rss in self.rows if f >= SETTLED)
         growth = self.rows[-1][1] - settled
         last = self.rows[-1][0]
+        rate = 1000 * growth / max(last - frame, 1)
         print(f"peak RSS {peak:.1f} MB; growth from frame {frame} to {last}: {growth:+.1f} MB")
+        print(f"growth per 1,000 frames: {rate:+.2f} MB")
         print(f"CPU time {time.process_time() - self.started:.0f} s")
+        self.traced.report(last - frame)
 
 
-def run_localize(settings: DriftSettings, keep_all: bool) -> None:
+class Traced:
+    """With `--trace`: tracemalloc's allocation sites that grew from SETTLED to the end."""
+
+    def __init__(self, enabled: bool) -> None:
+        self.enabled = enabled
+        self.settled: tracemalloc.Snapshot | None = None
+        if enabled:
+            tracemalloc.start(8)
+
+    def take(self, frame_index: int) -> None:
+        if self.enabled and self.settled is None and frame_index >= SETTLED:
+            self.settled = tracemalloc.take_snapshot()
+
+    def report(self, frames: int, top: int = 12) -> None:
+        if not self.enabled or self.settled is None:
+            return
+        grown = tracemalloc.take_snapshot().compare_to(self.settled, "traceback")
+        total = sum(stat.size_diff for stat in grown)
+        print(f"traced growth after frame {SETTLED}: {total / 1e3:+.1f} kB over {frames} frames")
+        for stat in grown[:top]:
+            where = " <- ".join(
+                f"{Path(f.filename).name}:{f.lineno}" for f in list(stat.traceback)[::-1][:4]
+            )
+            print(f"  {stat.size_diff / 1e3:+9.1f} kB {stat.count_diff:+7d} blocks  {where}")
+
+
+def run_localize(settings: DriftSettings, keep_all: bool, trace: bool) -> None:
     frames = DriftingTexture(settings)
-    samples = Samples()
+    samples = Samples(trace)
     samples.take(0)
     window = settings.frames if keep_all else 0
     records = []
@@ -82,7 +119,7 @@ def run_localize(settings: DriftSettings, keep_all: bool) -> None:
     samples.report()
 
 
-def run_app(settings: DriftSettings, keep_all: bool) -> None:
+def run_app(settings: DriftSettings, keep_all: bool, trace: bool) -> None:
     from app.config import AppConfig
     from app.controller import TabController
     from app.memory import release_freed_memory
@@ -96,7 +133,7 @@ def run_app(settings: DriftSettings, keep_all: bool) -> None:
             cv2.imwrite(str(images / f"{index + 1:05d}.jpg"), source.read_bgr(index))
         config = AppConfig(sessions_dir=Path(folder) / "sessions", tracker_threads=1)
         controller = TabController(config, (Path(folder),), RecordingRegistry(), 1)
-        samples = Samples()
+        samples = Samples(trace)
         samples.take(0)
         controller.open(images, None)
         if keep_all:
@@ -122,14 +159,20 @@ def main() -> None:
     parser.add_argument("driver", choices=("localize", "app"))
     parser.add_argument("--keep-all-maps", action="store_true", help="the 'before' figures")
     parser.add_argument("--frames", type=int, default=3000)
+    parser.add_argument(
+        "--trace",
+        action="store_true",
+        help="list the allocation sites that grew after the first windows (tracemalloc; "
+        "its own bookkeeping inflates the RSS figures)",
+    )
     args = parser.parse_args()
     settings = DriftSettings(frames=args.frames)
     label = "every map kept" if args.keep_all_maps else "map window"
     print(f"{args.driver}: {args.frames} frames x {TARGETS} targets, {label}")
     if args.driver == "localize":
-        run_localize(settings, args.keep_all_maps)
+        run_localize(settings, args.keep_all_maps, args.trace)
     else:
-        run_app(settings, args.keep_all_maps)
+        run_app(settings, args.keep_all_maps, args.trace)
 
 
 if __name__ == "__main__":

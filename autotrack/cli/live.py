@@ -121,12 +121,13 @@ def run_localize_live(
     from autotrack.io.live import LiveLog, LiveReader, describe_source
     from autotrack.localization.pnp import boxes_by_landmark
     from autotrack.pipeline.live import run_live, warm_up
+    from autotrack.pipeline.outcomes import OutcomeLog
 
     boxes = boxes_by_landmark(init, scene)
     reader = LiveReader(args.sequence, fps=args.fps)
     warm_up(tracker_params, reader.frame_size, list(boxes.values()))
     progress = tqdm(unit="frame", desc=describe_source(args.sequence), disable=args.quiet)
-    records = []
+    records = OutcomeLog(scene.landmark_ids)
     with reader, progress:
         log = LiveLog(reader)
         outcomes = run_live(
@@ -142,7 +143,7 @@ def run_localize_live(
             **_pose_options(args),
         )
         for _, outcome in outcomes:
-            records.append(outcome.without_maps())
+            records.append(outcome)
             progress.update()
     summary = log.summary()
     capture_times = np.array([frame.capture_time for frame in summary.processed])
@@ -151,7 +152,7 @@ def run_localize_live(
     if gt is not None:
         # The ground truth is timed by the source's frames: match by capture index / fps.
         source_fps = reader.source_fps or reader.fps or DEFAULT_FPS
-        frame_times = np.array([record.frame_index for record in records]) / source_fps
+        frame_times = records.frame_indices / source_fps
         table = summarise(records, frame_times, scene, None, None, gt, name)
         print(table.split("\n", 1)[1])
     if args.session is not None:

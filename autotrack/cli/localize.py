@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 import math
 import sys
-from collections.abc import Iterator, Sequence
+from collections.abc import Iterator
 from dataclasses import replace
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -23,7 +23,7 @@ from autotrack.localization.scene import Scene, load_scene, scene_warnings
 from autotrack.params import PRESETS, preset
 
 if TYPE_CHECKING:
-    from autotrack.pipeline import FrameOutcome
+    from autotrack.pipeline.outcomes import OutcomeLog
 
 DEFAULT_FPS = 10.0
 LARGE_ERROR_CM = 20.0
@@ -176,6 +176,7 @@ def run_localize(args: argparse.Namespace) -> int:
     from autotrack.localization.refine import RefineParams
     from autotrack.localization.smoothing import SmootherParams
     from autotrack.pipeline import Recording, localize_sequence
+    from autotrack.pipeline.outcomes import OutcomeLog
 
     _check_arguments(args)
     scene_path = _default_file(args.scene, args.sequence, "scene.json", "--scene")
@@ -206,7 +207,7 @@ def run_localize(args: argparse.Namespace) -> int:
     recording = None
     if args.session is not None:
         recording = Recording(source=str(args.sequence), path=args.session, scene_path=scene_path)
-    records = []
+    records = OutcomeLog(scene.landmark_ids)
     progress = tqdm(total=len(frames), unit="frame", desc=frames.name, disable=args.quiet)
     with frames, progress:
         outcomes = localize_sequence(
@@ -223,14 +224,14 @@ def run_localize(args: argparse.Namespace) -> int:
             map_window=0,  # the report needs boxes and poses only: memory stays flat
         )
         for outcome in outcomes:
-            records.append(outcome.without_maps())
+            records.append(outcome)
             progress.update()
     timestamps = np.arange(len(records)) / fps
     report = summarise(records, timestamps, scene, args.out, args.tracks, gt, frames.name)
     if args.smoothed is not None and smoother is not None:
         report += "\n" + smoothed_report(records, timestamps, args.smoothed, smoother, gt)
     print(report)
-    if not any(record.pose.valid for record in records):
+    if not any(pose.valid for pose in records.poses):
         print(
             "autotrack: warning: no frame got a valid pose: check the scene's intrinsics and "
             "landmarks, the boxes and --max-rms",
@@ -242,7 +243,7 @@ def run_localize(args: argparse.Namespace) -> int:
 
 
 def summarise(
-    records: Sequence[FrameOutcome],
+    records: OutcomeLog,
     timestamps: np.ndarray,
     scene: Scene,
     out: Path | None,
@@ -254,7 +255,7 @@ def summarise(
     from autotrack.io.tum import write_tum
     from autotrack.localization.trajectory import format_table3, trajectory_errors
 
-    poses = [record.pose for record in records]
+    poses = records.poses
     positions = np.array([pose.position for pose in poses]).reshape(-1, 3)
     quaternions = np.array([pose.quaternion_xyzw() for pose in poses]).reshape(-1, 4)
     valid = sum(pose.valid for pose in poses)
@@ -281,7 +282,7 @@ def summarise(
 
 
 def smoothed_report(
-    records: Sequence[FrameOutcome],
+    records: OutcomeLog,
     timestamps: np.ndarray,
     path: Path,
     smoother: Any,
@@ -293,7 +294,7 @@ def smoothed_report(
     from autotrack.localization.smoothing import samples_from_poses, smooth_poses
     from autotrack.localization.trajectory import trajectory_errors
 
-    samples = list(smooth_poses(samples_from_poses([r.pose for r in records]), smoother))
+    samples = list(smooth_poses(samples_from_poses(records.poses), smoother))
     positions = np.array([p.position for p in samples]).reshape(-1, 3)
     quaternions = np.array([p.quaternion_xyzw for p in samples]).reshape(-1, 4)
     path.parent.mkdir(parents=True, exist_ok=True)
@@ -329,29 +330,27 @@ def _tracks_header(scene: Scene) -> list[str]:
     return header
 
 
-def _tracks_rows(
-    records: Sequence[FrameOutcome], timestamps: np.ndarray, scene: Scene
-) -> Iterator[list[Any]]:
-    for record, stamp in zip(records, timestamps, strict=True):
-        pose = record.pose
-        row: list[Any] = [record.frame_index, f"{stamp:.6f}", int(pose.valid)]
+def _tracks_rows(records: OutcomeLog, timestamps: np.ndarray, scene: Scene) -> Iterator[list[Any]]:
+    frame_indices = records.frame_indices
+    for row_index, (pose, stamp) in enumerate(zip(records.poses, timestamps, strict=True)):
+        row: list[Any] = [int(frame_indices[row_index]), f"{stamp:.6f}", int(pose.valid)]
         row += [f"{v:.6f}" for v in pose.position]
         row += [f"{v:.6f}" for v in pose.quaternion_xyzw()]
         row += [f"{pose.rms_error_px:.3f}", f"{pose.position_std_m:.4f}"]
         excluded = "; ".join(f"{k} {why}" for k, why in pose.excluded_landmarks.items())
         row += [" ".join(pose.used_landmarks), excluded, pose.reason]
-        tracks = record.landmark_tracks
         for landmark_id in scene.landmark_ids:
-            track = tracks.get(landmark_id)
+            track = records.track(row_index, landmark_id)
             if track is None:
                 row += ["nan"] * 6
             else:
-                row += [f"{v:.2f}" for v in track.box]
-                row += [f"{track.peak_score:.4f}", int(track.aberrant)]
+                box, peak, aberrant = track
+                row += [f"{v:.2f}" for v in box]
+                row += [f"{peak:.4f}", int(aberrant)]
             row.append(f"{pose.reprojection_errors.get(landmark_id, math.nan):.3f}")
-        points, refined = record.image_points, record.refined
+        points, refined = records.image_points(row_index), records.refined(row_index)
         for landmark_id in scene.landmark_ids:
             u, v = points.get(landmark_id, (math.nan, math.nan))
             row += [f"{u:.3f}", f"{v:.3f}", int(refined.get(landmark_id, False))]
-        row.append("; ".join(f"{k} {what}" for k, what in record.events.items()))
+        row.append("; ".join(f"{k} {what}" for k, what in records.events(row_index).items()))
         yield row

@@ -82,9 +82,8 @@ class ResultHistory(Mapping[int, TrackResult]):
     def _insert_row(self, frame_index: int) -> int:
         """A new row for `frame_index`, in frame order (appended unless earlier frames follow)."""
         if self._count == len(self._frames):
-            capacity = 2 * len(self._frames)
-            self._frames = _resized(self._frames, capacity)
-            self._values = _resized(self._values, capacity)
+            self._frames = doubled(self._frames)
+            self._values = doubled(self._values)
         row = int(np.searchsorted(self._frames[: self._count], frame_index))
         if row < self._count:  # before later frames: shift them down one row
             self._frames[row + 1 : self._count + 1] = self._frames[row : self._count]
@@ -185,8 +184,10 @@ def _number(value: float) -> float:
     return value if value == value else _NAN
 
 
-def _resized(values: np.ndarray, capacity: int) -> np.ndarray:
-    grown = np.zeros((capacity, *values.shape[1:]), dtype=values.dtype)
+def doubled(values: np.ndarray) -> np.ndarray:
+    """`values` with twice its rows (the new ones zero): a growable column's next capacity, so
+    appending n rows copies O(n) in all."""
+    grown = np.zeros((2 * len(values), *values.shape[1:]), dtype=values.dtype)
     grown[: len(values)] = values
     return grown
 
