@@ -5,8 +5,8 @@ tracker) through one of two drivers and prints the process's RSS every 250 frame
 its growth after the first map windows (in all and per 1,000 frames), and (app) after the tab
 is closed:
 
-- `localize`: the pipeline as `autotrack localize` / `track` drive it (every frame's outcome
-  kept for the report, maps dropped; `Pipeline(map_window=0)`);
+- `localize`: the pipeline as `autotrack localize` / `track` drive it (`Pipeline(map_window=0)`,
+  every frame's outcome kept for the report in an `OutcomeLog`);
 - `app`: the app's per-tab controller (`TabController`) stepping frame by frame with the
   session recorded, a display snapshot every 10 frames, then the tab closed.
 
@@ -17,6 +17,8 @@ Each measurement runs in a fresh process:
     python benchmarks/memory.py localize [--keep-all-maps] [--frames 3000]
     python benchmarks/memory.py app [--keep-all-maps] [--frames 3000]
 
+`poses` prints the bytes kept per frame on the pose side (poses, solver inputs, refined
+points, the report's log), traced on the embedded demo: `python benchmarks/memory.py poses`.
 `--trace` also lists, with tracemalloc, the allocation sites that grew after the first windows
 (what is still kept per frame).
 """
@@ -33,7 +35,8 @@ from pathlib import Path
 import cv2
 
 from autotrack.params import preset
-from autotrack.pipeline import Pipeline
+from autotrack.pipeline import FrameOutcome, Pipeline
+from autotrack.pipeline.outcomes import OutcomeLog
 from autotrack.pipeline.pipeline import MAP_WINDOW
 from autotrack.synthetic.drift import DriftingTexture, DriftSettings
 
@@ -107,12 +110,16 @@ def run_localize(settings: DriftSettings, keep_all: bool, trace: bool) -> None:
     samples = Samples(trace)
     samples.take(0)
     window = settings.frames if keep_all else 0
-    records = []
+    kept: list[FrameOutcome] = []
+    log = OutcomeLog(())  # what `autotrack localize` keeps (the drift's targets are no landmarks)
     with Pipeline(frames, preset("autotrack"), map_window=window) as pipeline:
         for box in frames.boxes(TARGETS):
             pipeline.add_target(0, box, None)
         for outcome in pipeline.run():
-            records.append(outcome if keep_all else outcome.without_maps())
+            if keep_all:
+                kept.append(outcome)
+            else:
+                log.append(outcome)
             if outcome.frame_index % EVERY == 0 and outcome.frame_index:
                 samples.take(outcome.frame_index)
         samples.take(settings.frames - 1)
@@ -154,9 +161,45 @@ def run_app(settings: DriftSettings, keep_all: bool, trace: bool) -> None:
         print(f"tab closed: RSS {before:.1f} -> {rss_mb():.1f} MB")
 
 
+def run_poses(first: int = 20) -> None:
+    """Bytes kept per frame on the pose side: `localize` on the embedded demo (scene, four
+    landmarks, refinement and re-acquisition on), traced from frame `first` to the end."""
+    import json
+
+    from autotrack.io.frames import open_frames
+    from autotrack.localization.reacquire import ReacquireParams
+    from autotrack.localization.refine import RefineParams
+    from autotrack.localization.scene import load_scene
+    from autotrack.pipeline import localize_sequence
+
+    demo = Path(__file__).resolve().parents[1] / "static" / "demo"
+    scene = load_scene(demo / "scene.json")
+    boxes = json.loads((demo / "boxes.json").read_text())
+    log = OutcomeLog(scene.landmark_ids)
+    tracemalloc.start(8)
+    with open_frames(demo / "img") as frames:
+        options = {"refine_params": RefineParams(), "reacquire_params": ReacquireParams()}
+        run = localize_sequence(frames, scene, boxes, preset("autotrack"), map_window=0, **options)
+        last = len(frames) - 1
+        for outcome in run:  # the last snapshot before the run ends and frees its trackers
+            if outcome.frame_index == first:
+                settled = tracemalloc.take_snapshot()
+            log.append(outcome)
+            if outcome.frame_index == last:
+                grown = tracemalloc.take_snapshot().compare_to(settled, "traceback")
+    frames_traced = last - first
+    total = sum(stat.size_diff for stat in grown)
+    print(f"kept per frame, frames {first} to {last}: {total / frames_traced:.0f} B")
+    for stat in grown[:12]:
+        where = " <- ".join(
+            f"{Path(f.filename).name}:{f.lineno}" for f in list(stat.traceback)[::-1][:4]
+        )
+        print(f"  {stat.size_diff / frames_traced:7.0f} B/frame  {where}")
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("driver", choices=("localize", "app"))
+    parser.add_argument("driver", choices=("localize", "app", "poses"))
     parser.add_argument("--keep-all-maps", action="store_true", help="the 'before' figures")
     parser.add_argument("--frames", type=int, default=3000)
     parser.add_argument(
@@ -166,6 +209,9 @@ def main() -> None:
         "its own bookkeeping inflates the RSS figures)",
     )
     args = parser.parse_args()
+    if args.driver == "poses":
+        run_poses()
+        return
     settings = DriftSettings(frames=args.frames)
     label = "every map kept" if args.keep_all_maps else "map window"
     print(f"{args.driver}: {args.frames} frames x {TARGETS} targets, {label}")
