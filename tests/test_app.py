@@ -978,3 +978,15 @@ def test_shown_paths_hides_every_absolute_server_path(tmp_path: Path) -> None:
     shown = shown_paths(text, [root], [tmp_path / "sessions"])
     assert str(tmp_path) not in shown and "/etc" not in shown
     assert "data/car/x.mp4" in shown and "'sessions/b/s.mcap'" in shown and "passwd" in shown
+
+
+def test_shown_paths_leaves_urls_intact(tmp_path: Path) -> None:
+    from app.paths import shown_paths
+
+    root = (tmp_path / "data").resolve()
+    urls = ("rtsp://cam.local:8554/live/main", "http://example.com/data/x.mp4", "https://h/a/b")
+    text = f"cannot open {urls[0]} (timeout); {urls[1]} and {urls[2]}: see {root}/car/y.mp4"
+    shown = shown_paths(text, [root, Path("/data")], [tmp_path / "sessions"])
+    assert all(url in shown for url in urls), shown
+    assert "data/car/y.mp4" in shown and str(tmp_path) not in shown
+    assert "file://passwd" in shown_paths("file:///etc/passwd", [root])  # a server file: hidden
