@@ -231,8 +231,8 @@ class TabController:
         self.close_run()
         self.run = run
         self.ground_truth = ground_truth_positions(scene_path)
-        self.sequence_path = path
-        self.scene_path = scene_path
+        self.sequence_path, self.scene_path = path, scene_path
+        self.preset_name = run.params.name  # a reopened session's own preset
         boxes = (path if path.is_dir() else path.parent) / "boxes.json"
         self.boxes_path = boxes if boxes.is_file() and run.scene is not None else None
         self.cursor = 0
@@ -256,8 +256,7 @@ class TabController:
         self.run.frames.close()
         if self.recording_path is not None:
             self.recordings.release(self.recording_path)
-        self.run = None
-        self.recording_path = None
+        self.run, self.recording_path, self.boxes_path, self.truth = None, None, None, None
 
     def claim_recording(self) -> None:
         """Register the run's session file (created at the first edit) as this tab's."""

@@ -990,3 +990,45 @@ def test_shown_paths_leaves_urls_intact(tmp_path: Path) -> None:
     assert all(url in shown for url in urls), shown
     assert "data/car/y.mp4" in shown and str(tmp_path) not in shown
     assert "file://passwd" in shown_paths("file:///etc/passwd", [root])  # a server file: hidden
+
+
+def test_a_reopened_session_shows_the_preset_it_was_recorded_with(studio) -> None:
+    first, _ = _open_tab(studio, tab_id=1)
+    _set(first.panels.sequence.preset, "strcf")
+    _set(first.panels.sequence.path, "demo")
+    _click(first.panels.sequence.open_path)
+    assert first.wait_idle()
+    assert first.controller.run.params.name == "strcf"
+    _drag(first, _demo_boxes()["A"])
+    recorded = first.controller.run.session_path
+    studio.close_tab(1)
+
+    tab, _ = _open_tab(studio, tab_id=2)
+    assert tab.panels.sequence.preset.value == "autotrack"  # the server's default
+    _click(tab.panels.session.refresh)
+    assert tab.wait_idle()
+    _set(tab.panels.session.sessions, recorded.name)
+    _click(tab.panels.session.reopen)
+    assert tab.wait_idle()
+    assert tab.controller.run.params.name == "strcf"
+    assert tab.panels.sequence.preset.value == "strcf"  # not the default it showed
+    assert tab.controller.preset_name == "strcf"  # and the next sequence opened uses it
+
+
+def test_load_boxes_json_follows_the_open_source(studio, tmp_path: Path) -> None:
+    from app.live import LiveControl
+    from tests.test_app_live import _demo_video
+
+    tab, _ = _open_tab(studio)
+    boxes_json = tab.panels.targets.boxes_json
+    assert boxes_json.visible and not boxes_json.disabled  # the demo has one
+    media = tmp_path / "sessions" / "media"
+    media.mkdir()
+    _demo_video(media)
+    tab.live = LiveControl(tab.controller, allowed=True)  # as --allow-live gives it
+    tab.worker.submit(tab.live.open_source, "sessions/media/flight.avi")
+    _wait_for(lambda: tab.live.state == "preview", timeout=10)
+    _wait_for(lambda: not boxes_json.visible, timeout=5)  # not the demo's any more
+    assert tab.live.state == "preview" and tab.controller.boxes_path is None
+    tab.worker.submit(tab.live.stop)
+    assert tab.wait_idle()
