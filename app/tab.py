@@ -69,7 +69,12 @@ class Tab:
         )
         self.panels = build_panels(gui, config)
         self.display = DisplayLoop(
-            self.panels, gui, scene_api, channel, name=f"tab{tab_id}-display"
+            self.panels,
+            gui,
+            scene_api,
+            channel,
+            name=f"tab{tab_id}-display",
+            max_targets=config.max_targets,
         )
         self._scene_shown = 0
         self._table_shown = 0.0

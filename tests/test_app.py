@@ -289,6 +289,34 @@ def test_the_eta_chart_is_logarithmic_and_always_holds_phi() -> None:
     assert log_range([np.array([np.nan])], 0.3) == (0.1, 1.0)
 
 
+def test_a_flat_signal_gets_a_range_around_its_value() -> None:
+    from app.plots import y_range
+
+    for value in (12.9, -3.0, 1e-4):  # e.g. theta while nothing changes
+        low, high = y_range([np.full(30, value), np.array([np.nan])])
+        assert low < value < high and high - low >= 0.2 * abs(value), (value, low, high)
+    low, high = y_range([np.zeros(30)])
+    assert low <= -1.0 and high >= 1.0  # not +-1e-7, whose ticks all read "0"
+
+
+def test_the_eta_axis_labels_one_decade_per_grid_line() -> None:
+    from app.plots import decade_axis
+
+    axis = decade_axis((1e-3, 1e3))
+    assert axis["splits"] == (1e-3, 1e-2, 0.1, 1.0, 10.0, 100.0, 1e3)
+    assert axis["values"] == ("1e-3", "1e-2", "0.1", "1", "10", "100", "1e3")
+    assert decade_axis((0.1, 1.0))["values"] == ("0.1", "1")
+
+
+def test_frames_without_a_value_reach_the_chart_as_gaps() -> None:
+    from app.plots import chart_data
+
+    fps = np.array([np.nan, 20.0, 21.0, np.nan, np.nan, 19.0])  # two dropped frames
+    x, values, line = chart_data(6, [fps], 5, (0.0, 30.0))
+    assert values[:6] == [None, 20.0, 21.0, None, None, 19.0]  # null: uPlot breaks the line
+    assert len(x) == len(values) == len(line) and line.count(None) == 6
+
+
 def test_the_cursor_line_stands_at_the_current_frame() -> None:
     from app.plots import CURSOR_OFFSETS, with_cursor
 
