@@ -529,7 +529,7 @@ def test_status_shows_the_in_app_and_trackers_alone_rates() -> None:
     tracked = np.array([np.nan, 0.05, 0.05, 0.05])
     played = np.array([np.nan, np.nan, 0.1, 0.1])
     assert rates_text(tracked, played, 3) == (
-        "playing 10.0 frames/s in the app · trackers alone 20.0 frames/s"
+        "played at 10.0 frames/s in the app · trackers alone 20.0 frames/s"
     )
     assert rates_text(tracked, np.full(4, np.nan), 3) == ""  # nothing played
 
@@ -1060,3 +1060,21 @@ def test_load_boxes_json_follows_the_open_source(studio, tmp_path: Path) -> None
     assert tab.live.state == "preview" and tab.controller.boxes_path is None
     tab.worker.submit(tab.live.stop)
     assert tab.wait_idle()
+
+
+def test_a_tab_can_reopen_the_session_it_is_recording(studio) -> None:
+    tab, channel = _open_tab(studio)
+    _drag(tab, _demo_boxes()["A"])
+    _set(tab.panels.playback.frame, 4)
+    assert tab.wait_idle()
+    own = tab.controller.run.session_path
+    _click(tab.panels.session.refresh)
+    assert tab.wait_idle()
+    _set(tab.panels.session.sessions, own.name)
+    _click(tab.panels.session.reopen)
+    assert tab.wait_idle()
+    assert not [note for note, error in channel.notes if error], channel.notes  # not "another tab"
+    controller = tab.controller
+    assert controller.message.startswith(f"Reopened {own.name}") and controller.cursor == 3
+    assert list(controller.run.targets) == ["T1"] and controller.run.session_path != own
+    assert studio.recordings.writer_of(own) is None
