@@ -686,3 +686,26 @@ def test_start_from_ground_truth_scores_like_the_cli(tmp_path: Path, capsys) -> 
 def test_ground_truth_needs_a_box_on_the_frame(controller) -> None:
     with pytest.raises(InputError, match="no groundtruth_rect.txt"):
         controller.start_from_truth()  # the demo has none
+
+
+def test_playing_a_cut_video_stops_at_its_last_frame(tmp_path: Path) -> None:
+    from tests.test_app_live import _demo_video
+
+    media = tmp_path / "media"
+    media.mkdir()
+    whole = _demo_video(media).read_bytes()
+    (media / "cut.avi").write_bytes(whole[: len(whole) // 2])  # its header says 60 frames
+    controller = _controller(tmp_path / "sessions")
+    controller.roots = (*controller.roots, media.resolve())
+    try:
+        controller.open_typed("media/cut.avi")
+        controller.place_box(tuple(_demo_boxes()["A"]))
+        controller.toggle_play()
+        for _ in range(100):  # no error on the way, and no frame past the end
+            if not controller.playing:
+                break
+            controller.play_step()
+        assert not controller.playing and controller.cursor == controller.run.frame_count - 1
+        assert 10 < controller.run.frame_count < 60
+    finally:
+        controller.close()
