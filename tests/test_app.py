@@ -1078,3 +1078,26 @@ def test_a_tab_can_reopen_the_session_it_is_recording(studio) -> None:
     assert controller.message.startswith(f"Reopened {own.name}") and controller.cursor == 3
     assert list(controller.run.targets) == ["T1"] and controller.run.session_path != own
     assert studio.recordings.writer_of(own) is None
+
+
+def test_show_ground_truth_redraws_the_canvas_at_once(tmp_path: Path) -> None:
+    if not (SHARED_SEQUENCES / "DTB70" / "Gull1").is_dir():
+        pytest.skip("../shared/data/sequences is not present")
+    from app.server import StudioServer
+    from tests.test_app_controller import _first_frames
+
+    sequence = _first_frames(SHARED_SEQUENCES / "DTB70" / "Gull1", tmp_path / "Gull1", 3)
+    studio = StudioServer(
+        AppConfig(sequence=sequence, port=_free_port(), sessions_dir=tmp_path / "sessions")
+    )
+    try:
+        tab, channel = _open_tab(studio)
+        stats = tab.display.stats
+        _wait_for(lambda: stats.canvas_frames >= 1)
+        time.sleep(0.5)  # nothing else to draw
+        drawn = stats.canvas_frames
+        _set(tab.panels.targets.show_truth, True)  # no command runs: only the checkbox
+        _wait_for(lambda: stats.canvas_frames > drawn, timeout=5.0)
+        assert not [note for note, error in channel.notes if error]
+    finally:
+        studio.stop()
