@@ -231,13 +231,11 @@ class TabController:
         self.close_run()
         self.run = run
         self.ground_truth = ground_truth_positions(scene_path)
-        self.sequence_path = path
-        self.scene_path = scene_path
+        self.sequence_path, self.scene_path = path, scene_path
+        self.preset_name = run.params.name  # a reopened session's own preset
         boxes = (path if path.is_dir() else path.parent) / "boxes.json"
         self.boxes_path = boxes if boxes.is_file() and run.scene is not None else None
-        self.cursor = 0
-        self.selected = None
-        self.ties = LandmarkTies()
+        self.cursor, self.selected, self.ties = 0, None, LandmarkTies()
         self.play_seconds = np.full(run.frame_count, np.nan)
         self.truth = load_truth(path, run.frame_count)
         self.truth_target = None
@@ -256,8 +254,7 @@ class TabController:
         self.run.frames.close()
         if self.recording_path is not None:
             self.recordings.release(self.recording_path)
-        self.run = None
-        self.recording_path = None
+        self.run, self.recording_path, self.boxes_path, self.truth = None, None, None, None
 
     def claim_recording(self) -> None:
         """Register the run's session file (created at the first edit) as this tab's."""
@@ -379,8 +376,9 @@ class TabController:
             self.stop_playing()
             return
         run = self.require_run()
-        if self.cursor >= run.frame_count - 1:
-            raise InputError("already at the last frame")
+        if self.cursor >= run.frame_count - 1:  # not an error: a Pause pressed as it ended
+            self.message = f"At the last frame ({run.frame_count}): step back to play again."
+            return
         self.playing = True
 
     def stop_playing(self) -> None:
@@ -443,8 +441,11 @@ class TabController:
         path = self.session_choices.get(name)
         if path is None:
             raise InputError("choose a session from the list first (Refresh sessions)")
-        if self.recordings.writer_of(path) is not None:
+        writer = self.recordings.writer_of(path)
+        if writer not in (None, self.tab_id):
             raise InputError(f"{path.name} is being recorded by another tab; reopen it later")
+        if writer == self.tab_id:  # this tab's own recording: finished first, then reopened
+            self.close_run()
         session = open_session(path)
         if session.image_count:  # a live run's recording: its own frames, to look through
             return self.review_session(path)

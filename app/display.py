@@ -151,11 +151,12 @@ class DisplayLoop:
         channel: ClientChannel,
         *,
         name: str,
+        max_targets: int = 4,
     ) -> None:
         self.panels = panels
         self.scene_api = scene_api
         self.channel = channel
-        self.plots = SignalPlots(gui, panels.debug.signals)
+        self.plots = SignalPlots(gui, panels.debug.signals, slots=max_targets)
         self.truth_plots = TruthPlots(gui, panels.debug.truth)
         self.view3d = SceneView(scene_api)
         self.map_panels = MapPanels(gui, panels.display.maps_folder)

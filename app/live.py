@@ -20,7 +20,7 @@ from pathlib import Path
 import numpy as np
 
 from app.controller import POSE_OPTIONS, TabController
-from app.paths import live_source
+from app.paths import display_name, live_source
 from app.views import FrameView, SignalHistory
 from autotrack.errors import AutoTrackError, InputError
 from autotrack.io.boxes_json import read_boxes_json
@@ -113,7 +113,7 @@ class LiveControl:
         try:
             first = reader.next_frame()
             if first is None:
-                raise InputError(f"{describe_source(source)} delivered no frame")
+                raise InputError(f"{self._shown(source)} delivered no frame")
         except Exception:
             reader.close()
             raise
@@ -123,9 +123,7 @@ class LiveControl:
         self.reader, self.source, self.newest = reader, source, first
         self.scene_path, self._scene = scene_path, scene
         self.state = PREVIEW
-        controller.message = (
-            f"Live: {describe_source(source)}. Freeze a frame to draw the boxes on it."
-        )
+        controller.message = f"Live: {self._shown(source)}. Freeze a frame to draw the boxes on it."
 
     def step(self) -> None:
         """While previewing, show the newest frame; while tracking, track it."""
@@ -133,7 +131,7 @@ class LiveControl:
             frame = self._reader().next_frame()
             if frame is None:
                 self.close()
-                raise InputError(f"{describe_source(self.source)} ended (nothing was tracked)")
+                raise InputError(f"{self._shown(self.source)} ended (nothing was tracked)")
             self.newest = frame
         elif self.state == TRACKING:
             self._track_next()
@@ -147,7 +145,7 @@ class LiveControl:
         if self.state != PREVIEW or self.newest is None:
             raise InputError("open a live source first" if self.state == OFF else "already frozen")
         controller, frame = self.controller, self.newest
-        frames = LiveFrames(describe_source(self.source), self._reader().fps)
+        frames = LiveFrames(self._shown(self.source), self._reader().fps)
         frames.take(frame)
         recording = Recording(
             source=str(self.source),
@@ -222,7 +220,7 @@ class LiveControl:
         except StopIteration:
             figures = self.figures()
             ended = "ended" if isinstance(self.source, Path) else "stopped sending (ended or lost)"
-            self._say_recorded(self._finish(), figures, f"{describe_source(self.source)} {ended}")
+            self._say_recorded(self._finish(), figures, f"{self._shown(self.source)} {ended}")
             return
         except InputError as error:
             figures = self.figures()
@@ -293,7 +291,7 @@ class LiveControl:
         """The preview frame, or the controller's view with the live figures (None when off)."""
         controller = self.controller
         if self.state == PREVIEW and self.newest is not None:
-            return preview_view(self.newest, describe_source(self.source), controller.message)
+            return preview_view(self.newest, self._shown(self.source), controller.message)
         view = controller.snapshot()
         figures = self.figures() if self.state == TRACKING else None
         if view is None or figures is None:
@@ -322,6 +320,13 @@ class LiveControl:
         if self.reader is None:
             raise InputError("open a live source first")
         return self.reader
+
+    def _shown(self, source: Path | str | None) -> str:
+        """How the browser is told the source: 'camera 0', the URL, or a video file relative
+        to the allowed folder holding it (never the server's absolute path)."""
+        if isinstance(source, Path) and source.is_absolute():
+            return display_name(source, self.controller.roots)
+        return describe_source("" if source is None else source)
 
     def _boxes_json(self) -> Path | None:
         """The boxes.json beside the scene file, else beside the video file."""

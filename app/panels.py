@@ -146,6 +146,7 @@ def show_live(panels: Panels, live: LiveControl) -> None:
     quiet.set(widgets.start, "disabled", live.state != FROZEN)
     quiet.set(widgets.stop, "disabled", live.state == OFF)
     quiet.set(widgets.open, "disabled", live.state == TRACKING)
+    quiet.set(panels.targets.boxes_json, "disabled", live.state in (PREVIEW, TRACKING))
 
 
 @dataclass
@@ -364,14 +365,15 @@ def show_state(panels: Panels, controller: TabController) -> None:
 
 
 def show_opened(panels: Panels, controller: TabController) -> None:
-    """The opened sequence's path, scene file and length (only when one was opened, so that
-    a path being typed is not overwritten)."""
+    """The opened sequence's path, scene file, tracker preset (a reopened session's own) and
+    length (only when one was opened, so that a path being typed is not overwritten)."""
     quiet, sequence = panels.quiet, panels.sequence
     path, scene_path, run = controller.sequence_path, controller.scene_path, controller.run
     roots = controller.roots
     quiet.set(sequence.path, "value", "" if path is None else display_name(path, roots))
     shown_scene = "" if scene_path is None else display_name(scene_path, roots)
     quiet.set(sequence.scene, "value", shown_scene)
+    quiet.set(sequence.preset, "value", controller.preset_name)
     quiet.set(panels.playback.frame, "max", max(2, 0 if run is None else run.frame_count))
     listed = next((n for n, p in controller.sequence_choices.items() if p == path), None)
     if listed is not None:  # the list shows the sequence that is open

@@ -209,17 +209,30 @@ def _root_label(root: Path) -> str:
 
 
 _ABSOLUTE_PATH = re.compile(r"(?<![\w.~-])/(?:[^\s'\"/:]+/)*([^\s'\"/:]*)")
+_URL = re.compile(r"(?<![\w+.-])(?!file:)[A-Za-z][A-Za-z0-9+.-]*://[^\s'\"<>]*")
+"""A URL (rtsp://host/stream, http://...): not a server path, left as it is (file:// URLs
+name server files and are hidden as paths)."""
 
 
 def shown_paths(text: str, roots: Sequence[Path], private: Sequence[Path] = ()) -> str:
     """`text` (a message for the browser) with the server's absolute paths hidden: a path under
     an allowed root as the app shows it (`<root name>/...`), a path under one of the `private`
-    folders (sessions, incoming uploads) or anywhere else as its last component only."""
+    folders (sessions, incoming uploads) or anywhere else as its last component only. URLs are
+    left intact."""
     named = [(root, _root_label(root)) for root in roots]
     named += [(folder.resolve(), folder.name) for folder in private]
-    for folder, label in sorted(named, key=lambda item: len(str(item[0])), reverse=True):
-        text = text.replace(str(folder), label)
-    return _ABSOLUTE_PATH.sub(lambda match: match.group(1) or "/", text)
+    named.sort(key=lambda item: len(str(item[0])), reverse=True)
+
+    def hidden(part: str) -> str:
+        for folder, label in named:
+            part = part.replace(str(folder), label)
+        return _ABSOLUTE_PATH.sub(lambda match: match.group(1) or "/", part)
+
+    shown, start = [], 0
+    for url in _URL.finditer(text):
+        shown += [hidden(text[start : url.start()]), url.group(0)]
+        start = url.end()
+    return "".join([*shown, hidden(text[start:])])
 
 
 _SAFE_NAME = re.compile(r"[^A-Za-z0-9._-]+")

@@ -1,12 +1,18 @@
-"""Live uPlot charts of the tracker's signals over frames, one series per target.
+"""Live uPlot charts of the tracker's signals over frames, one series per target slot.
 
-Frames without a value hold NaN, which uPlot cannot range over (a NaN anywhere on a scale
-leaves the chart empty) but skips when drawing a line or a point. So every chart gets an
-explicit y range fitted to the finite values it shows (rounded outward, so it changes only
-when the data leaves it). The global variation η is on a log scale whose range always holds
-the threshold φ, so one spike cannot hide φ. Aberrant frames are a points-only red series; a
-grey vertical line marks the current frame (two extra x points just after it carry the line,
-the other series repeat the current frame's value there).
+The charts are made once per tab, with one series per target number (T1 .. T<max targets>, in
+the targets' colours), and only their data and scales change afterwards: a chart made again
+is drawn before its panel has its width and flashes narrow. A slot without a target holds no
+values.
+
+Frames without a value are sent as null, which uPlot draws as a gap (it would draw a NaN
+line across, as over a live source's dropped frames). Every chart gets an explicit y range
+fitted to the finite values it shows (rounded outward, so it changes only when the data
+leaves it); a flat signal gets a range of ±10% around its value. The global variation η is on
+a log scale whose range always holds the threshold φ, so one spike cannot hide φ, with one
+labelled grid line per decade. Aberrant frames are a points-only red series; a grey vertical
+line marks the current frame (two extra x points just after it carry the line, the other
+series repeat the current frame's value there).
 """
 
 from __future__ import annotations
@@ -18,6 +24,7 @@ import numpy as np
 import viser
 import viser.uplot
 
+from app.canvas import target_colour
 from app.views import SignalHistory
 
 ABERRANT_COLOUR = "#e03131"
@@ -29,6 +36,11 @@ X_STEP = 50
 CHART_PADDING = (12, 12, 0, 0)
 """Space (top, right, bottom, left; CSS px) around a chart so its top tick label is not cut."""
 CHART_TITLES = ("Peak score", "Global variation η (log) vs φ", "θ_ref (dots) and θ", "Speed")
+FLAT_MARGIN = 0.1
+"""Half-height of a flat signal's range, as a fraction of its value (±1 around zero)."""
+ETA_CHART = CHART_TITLES.index("Global variation η (log) vs φ")
+
+Chart = tuple[np.ndarray | list[float | None], ...]
 
 
 def x_range(last: int, frame_count: int) -> tuple[float, float]:
@@ -45,12 +57,16 @@ def _finite(arrays: Sequence[np.ndarray]) -> np.ndarray:
 
 def y_range(arrays: Sequence[np.ndarray]) -> tuple[float, float]:
     """A range holding every finite value with 10% headroom, rounded outward to a tenth of the
-    span's order of magnitude ((0, 1) before any value)."""
+    span's order of magnitude ((0, 1) before any value; ±FLAT_MARGIN around a flat signal)."""
     values = _finite(arrays)
     if values.size == 0:
         return (0.0, 1.0)
     low, high = float(values.min()), float(values.max())
-    span = max(high - low, 1e-6, 1e-3 * max(abs(low), abs(high)))
+    if high - low <= 1e-3 * max(abs(low), abs(high)):  # flat: the ticks need a real span
+        centre = 0.5 * (low + high)
+        half = FLAT_MARGIN * abs(centre) if centre != 0.0 else 1.0
+        low, high = centre - half, centre + half
+    span = high - low
     low, high = low - 0.1 * span, high + 0.1 * span
     step = 10.0 ** np.floor(np.log10(span)) / 10.0
     return (float(np.floor(low / step) * step), float(np.ceil(high / step) * step))
@@ -63,6 +79,26 @@ def log_range(arrays: Sequence[np.ndarray], keep: float) -> tuple[float, float]:
     low = 10.0 ** math.floor(math.log10(float(values.min())))
     high = 10.0 ** math.ceil(math.log10(float(values.max())))
     return (low, high if high > low else low * 10.0)
+
+
+def decade_label(exponent: int) -> str:
+    """How the log axis labels 10**exponent: 0.1, 1, 10 and 100 plainly, others as 1e-3."""
+    return f"{10.0**exponent:g}" if -1 <= exponent <= 2 else f"1e{exponent}"
+
+
+def decade_axis(span: tuple[float, float]) -> viser.uplot.Axis:
+    """A y axis with one tick, grid line and label per decade of `span` (whole decades)."""
+    first, last = (round(math.log10(bound)) for bound in span)
+    exponents = range(first, last + 1)
+    return viser.uplot.Axis(
+        splits=tuple(10.0**k for k in exponents),
+        values=tuple(decade_label(k) for k in exponents),
+    )
+
+
+def with_gaps(values: np.ndarray) -> list[float | None]:
+    """`values` with null (None) for the frames without one: uPlot breaks its line there."""
+    return [float(v) if math.isfinite(v) else None for v in values.tolist()]
 
 
 def with_cursor(
@@ -81,6 +117,24 @@ def with_cursor(
     line[at : at + len(CURSOR_OFFSETS)] = span
     out.append(line)
     return tuple(out)
+
+
+def chart_data(
+    count: int, series: Sequence[np.ndarray], cursor: int, span: tuple[float, float]
+) -> Chart:
+    """What a chart is sent: `with_cursor`'s arrays, the y series with null gaps."""
+    x, *ys = with_cursor(count, series, cursor, span)
+    return (x, *(with_gaps(values) for values in ys))
+
+
+def send_data(handle: viser.GuiUplotHandle, data: Chart) -> None:
+    """Assign a chart's data keeping its nulls. Assigning `handle.data` casts every series to
+    a float64 array, null becoming NaN again, so the data is queued past that cast (viser 1.1:
+    the handle's props and its update message, as the assignment itself does)."""
+    if handle._impl.removed:
+        raise RuntimeError("the chart was removed")
+    handle._impl.props.data = data
+    handle._queue_update("data", data)
 
 
 def _css(colour: tuple[int, int, int]) -> str:
@@ -126,61 +180,86 @@ def _rate(seconds: np.ndarray) -> np.ndarray:
     return np.where(np.isfinite(rate), rate, np.nan)
 
 
-def chart_series(history: SignalHistory, count: int) -> list[list[np.ndarray]]:
-    """The values of each chart (in CHART_TITLES order) over frames 0..count-1."""
-    ids = history.target_ids
+def slot_ids(history: SignalHistory, slots: int) -> tuple[str, ...]:
+    """The target ids the charts have series for: T1 .. T<slots>, or, when a run has other
+    ids (a session recorded elsewhere), its own."""
+    numbered = tuple(f"T{number}" for number in range(1, slots + 1))
+    return numbered if set(history.target_ids) <= set(numbered) else history.target_ids
 
-    def signal(name: str) -> list[np.ndarray]:
-        return [history.signals[tid][name][:count] for tid in ids]
 
-    eta = [np.where(v > 0, v, np.nan) for v in signal("global_variation")]
+def chart_series(
+    history: SignalHistory, count: int, ids: Sequence[str] | None = None
+) -> list[list[np.ndarray]]:
+    """The values of each chart (in CHART_TITLES order) over frames 0..count-1, one series per
+    id of `ids` (default: the run's targets; NaN for an id without a target)."""
+    ids = history.target_ids if ids is None else ids
+    missing = np.full(count, np.nan)
+
+    def signal(tid: str, name: str) -> np.ndarray:
+        return history.signals[tid][name][:count] if tid in history.signals else missing
+
+    eta = [np.where(v > 0, v, np.nan) for v in (signal(t, "global_variation") for t in ids)]
     theta: list[np.ndarray] = []
     for tid in ids:
-        theta += [history.signals[tid]["theta_ref"][:count], history.signals[tid]["theta"][:count]]
+        theta += [signal(tid, "theta_ref"), signal(tid, "theta")]
     aberrant_eta = _aberrant_values(history, "global_variation", count)
     return [
-        [*signal("peak_score"), _aberrant_values(history, "peak_score", count)],
+        [*(signal(t, "peak_score") for t in ids), _aberrant_values(history, "peak_score", count)],
         [*eta, np.full(count, history.phi), np.where(aberrant_eta > 0, aberrant_eta, np.nan)],
         theta,
         [_rate(history.frame_seconds[:count]), _rate(history.play_seconds[:count])],
     ]
 
 
-class SignalPlots:
-    """The four charts of a tab: peak score, global variation vs phi, theta_ref/theta, speed."""
+def chart_layouts(
+    ids: Sequence[str], colours: Sequence[str]
+) -> tuple[list[viser.uplot.Series], ...]:
+    """The series of each chart (CHART_TITLES order) for targets `ids` drawn in `colours`."""
+    pairs = list(zip(ids, colours, strict=True))
+    theta: list[viser.uplot.Series] = []
+    for tid, colour in pairs:
+        theta += [_points(f"{tid} θref", colour, 4), line_series(f"{tid} θ", colour)]
+    return (
+        [*(line_series(tid, c) for tid, c in pairs), _points("aberrant", ABERRANT_COLOUR, 7)],
+        [
+            *(line_series(f"{tid} η", c) for tid, c in pairs),
+            line_series("φ", "#868e96", dash=(6.0, 4.0)),
+            _points("aberrant", ABERRANT_COLOUR, 7),
+        ],
+        theta,
+        [line_series("trackers fps", "#1971c2"), line_series("in-app fps", "#2f9e44")],
+    )
 
-    def __init__(self, gui: viser.GuiApi, container: viser.GuiTabHandle | None = None) -> None:
+
+class SignalPlots:
+    """The four charts of a tab: peak score, global variation vs phi, theta_ref/theta, speed;
+    made once (see the module docstring), with series for targets T1 .. T<slots>."""
+
+    def __init__(
+        self, gui: viser.GuiApi, container: viser.GuiTabHandle | None = None, slots: int = 4
+    ) -> None:
         self.gui = gui
-        self._layout: tuple[str, ...] | None = None
-        """Target ids the charts were built for (not the frame count: a live source's grows
-        with every frame, and the x range is sent with each update)."""
-        self._handles: list[viser.GuiUplotHandle] = []
-        self._scales: list[dict | None] = []
+        self.slots = slots
         self._container = container if container is not None else gui.add_folder("Plots")
         with self._container:
-            self._hint = gui.add_markdown("The charts appear once a target is drawn.")
+            self._hint = gui.add_markdown("Draw a target to plot its signals here.")
+        self._handles: list[viser.GuiUplotHandle] = []
+        self._scales: list[dict | None] = []
+        self._axes: list[tuple | None] = []
+        self._ids: tuple[str, ...] = ()
+        numbered = tuple(f"T{number}" for number in range(1, slots + 1))
+        self._build(numbered, [_css(target_colour(index)) for index in range(slots)])
 
-    def _build(self, history: SignalHistory) -> None:
+    def _build(self, ids: tuple[str, ...], colours: Sequence[str]) -> None:
+        """(Re)make the charts with series for `ids`: at the start, and again only for a run
+        whose target ids are not T1 .. T<slots>."""
         for handle in self._handles:
             handle.remove()
-        colours = [_css(colour) for colour in history.colours]
-        pairs = list(zip(history.target_ids, colours, strict=True))
-        theta: list[viser.uplot.Series] = []
-        for tid, colour in pairs:
-            theta += [_points(f"{tid} θref", colour, 4), line_series(f"{tid} θ", colour)]
-        series = (
-            [*(line_series(tid, c) for tid, c in pairs), _points("aberrant", ABERRANT_COLOUR, 7)],
-            [
-                *(line_series(f"{tid} η", c) for tid, c in pairs),
-                line_series("φ", "#868e96", dash=(6.0, 4.0)),
-                _points("aberrant", ABERRANT_COLOUR, 7),
-            ],
-            theta,
-            [line_series("trackers fps", "#1971c2"), line_series("in-app fps", "#2f9e44")],
-        )
         handles = []
         with self._container:
-            for title, chart in zip(CHART_TITLES, series, strict=True):
+            for index, (title, chart) in enumerate(
+                zip(CHART_TITLES, chart_layouts(ids, colours), strict=True)
+            ):
                 empty = np.zeros(1)
                 handles.append(
                     self.gui.add_uplot(
@@ -189,34 +268,39 @@ class SignalPlots:
                         title=title,
                         aspect=2.0,
                         padding=CHART_PADDING,
+                        axes=self._initial_axes(index),
                     )
                 )
         self._handles = handles
         self._scales = [None] * len(handles)
-        self._layout = history.target_ids
+        self._axes = [self._initial_axes(index) for index in range(len(handles))]
+        self._ids = ids
+
+    @staticmethod
+    def _initial_axes(index: int) -> tuple | None:
+        if index != ETA_CHART:
+            return None
+        return (viser.uplot.Axis(), decade_axis((0.1, 1.0)))
 
     def update(self, history: SignalHistory, cursor: int) -> None:
-        """Send the latest values and the cursor at frame `cursor` (rebuilding the charts when
-        the target list changed)."""
+        """Send the latest values and the cursor at frame `cursor` (the charts stay; their
+        series are made again only for target ids outside T1 .. T<slots>)."""
         if self._hint.visible != (not history.target_ids):
             self._hint.visible = not history.target_ids
-        if not history.target_ids:
-            for handle in self._handles:
-                handle.remove()
-            self._handles = []
-            self._layout = None
-            return
-        if history.target_ids != self._layout:
-            self._build(history)
+        ids = slot_ids(history, self.slots)
+        if ids != self._ids:
+            self._build(ids, [_css(colour) for colour in history.colours])
         last = max(history.last_frame, cursor, 0)
         count = last + 1
         x_scale = {"time": False, "auto": False, "range": x_range(last, history.frame_count)}
         for index, (handle, series) in enumerate(
-            zip(self._handles, chart_series(history, count), strict=True)
+            zip(self._handles, chart_series(history, count, ids), strict=True)
         ):
-            if index == 1:
+            axes = None
+            if index == ETA_CHART:
                 span = log_range(series, history.phi)
                 y_scale = {"distr": 3, "log": 10, "auto": False, "range": span}
+                axes = (viser.uplot.Axis(), decade_axis(span))
             else:
                 span = y_range(series)
                 y_scale = {"auto": False, "range": span}
@@ -224,10 +308,13 @@ class SignalPlots:
             if scales != self._scales[index]:
                 handle.scales = scales
                 self._scales[index] = scales
-            handle.data = with_cursor(count, series, cursor, span)
+            if axes != self._axes[index]:
+                handle.axes = axes
+                self._axes[index] = axes
+            send_data(handle, chart_data(count, series, cursor, span))
 
     def data_of(self, index: int) -> Sequence[np.ndarray] | None:
-        """The data last sent to chart `index` (CHART_TITLES order)."""
+        """The data last sent to chart `index` (CHART_TITLES order; y series with None gaps)."""
         if not self._handles:
             return None
         return self._handles[index].data
@@ -236,3 +323,7 @@ class SignalPlots:
         """The y scale last sent to chart `index`."""
         scales = self._scales[index] if index < len(self._scales) else None
         return None if scales is None else scales["y"]
+
+    def axes_of(self, index: int) -> tuple | None:
+        """The axes last sent to chart `index` (None: uPlot's own)."""
+        return self._axes[index]

@@ -69,7 +69,12 @@ class Tab:
         )
         self.panels = build_panels(gui, config)
         self.display = DisplayLoop(
-            self.panels, gui, scene_api, channel, name=f"tab{tab_id}-display"
+            self.panels,
+            gui,
+            scene_api,
+            channel,
+            name=f"tab{tab_id}-display",
+            max_targets=config.max_targets,
         )
         self._scene_shown = 0
         self._table_shown = 0.0
@@ -120,7 +125,7 @@ class Tab:
                 submit(controller.start_from_truth),
             )
         )
-        targets.show_truth.on_update(edit(lambda: submit(self.display.wake, canvas=True)))
+        targets.show_truth.on_update(edit(lambda: submit(self.redraw_canvas)))
         playback.play.on_click(lambda _: submit(self.not_live, controller.toggle_play))
         playback.step_back.on_click(lambda _: submit(self.not_live, controller.step, -1))
         playback.step.on_click(lambda _: submit(self.not_live, controller.step, 1))
@@ -251,6 +256,10 @@ class Tab:
         self.display.wake(canvas=True)
         if self.panels.display.canvas.value == CANVAS_3D:
             self._aim_camera()
+
+    def redraw_canvas(self) -> None:
+        """Draw the canvas again (the ground truth shown or hidden)."""
+        self.display.wake(canvas=True)
 
     def maps_changed(self) -> None:
         """Show the per-target map panels only when chosen."""

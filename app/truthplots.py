@@ -9,7 +9,14 @@ import viser
 import viser.uplot
 
 from app.groundtruth import TruthView
-from app.plots import CHART_PADDING, cursor_series, line_series, with_cursor, x_range
+from app.plots import (
+    CHART_PADDING,
+    chart_data,
+    cursor_series,
+    line_series,
+    send_data,
+    x_range,
+)
 from autotrack.evaluation.metrics import PRECISION_SCORE_THRESHOLD
 
 
@@ -80,5 +87,5 @@ class TruthPlots:
             self.iou.scales = {"x": x_scale, "y": {"auto": False, "range": (0.0, 1.0)}}
             self._scales = scales
         threshold = np.full(count, PRECISION_SCORE_THRESHOLD)
-        self.error.data = with_cursor(count, [errors, threshold], cursor, (0.0, top))
-        self.iou.data = with_cursor(count, [truth.ious[:count]], cursor, (0.0, 1.0))
+        send_data(self.error, chart_data(count, [errors, threshold], cursor, (0.0, top)))
+        send_data(self.iou, chart_data(count, [truth.ious[:count]], cursor, (0.0, 1.0)))

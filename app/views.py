@@ -228,7 +228,7 @@ RATE_WINDOW = 10
 
 
 def rates_text(frame_seconds: np.ndarray, play_seconds: np.ndarray, frame_index: int) -> str:
-    """'playing N frames/s in the app · trackers alone M frames/s' over the RATE_WINDOW frames
+    """'played at N frames/s in the app · trackers alone M frames/s' over the RATE_WINDOW frames
     up to `frame_index` ('' when nothing was played there)."""
     start = max(0, frame_index - RATE_WINDOW + 1)
     played = play_seconds[start : frame_index + 1]
@@ -238,7 +238,7 @@ def rates_text(frame_seconds: np.ndarray, play_seconds: np.ndarray, frame_index:
     tracked = frame_seconds[start : frame_index + 1]
     tracked = tracked[np.isfinite(tracked)]
     alone = f" · trackers alone {1.0 / tracked.mean():.1f} frames/s" if tracked.size else ""
-    return f"playing {1.0 / played.mean():.1f} frames/s in the app{alone}"
+    return f"played at {1.0 / played.mean():.1f} frames/s in the app{alone}"
 
 
 def status_text(

@@ -289,6 +289,34 @@ def test_the_eta_chart_is_logarithmic_and_always_holds_phi() -> None:
     assert log_range([np.array([np.nan])], 0.3) == (0.1, 1.0)
 
 
+def test_a_flat_signal_gets_a_range_around_its_value() -> None:
+    from app.plots import y_range
+
+    for value in (12.9, -3.0, 1e-4):  # e.g. theta while nothing changes
+        low, high = y_range([np.full(30, value), np.array([np.nan])])
+        assert low < value < high and high - low >= 0.2 * abs(value), (value, low, high)
+    low, high = y_range([np.zeros(30)])
+    assert low <= -1.0 and high >= 1.0  # not +-1e-7, whose ticks all read "0"
+
+
+def test_the_eta_axis_labels_one_decade_per_grid_line() -> None:
+    from app.plots import decade_axis
+
+    axis = decade_axis((1e-3, 1e3))
+    assert axis["splits"] == (1e-3, 1e-2, 0.1, 1.0, 10.0, 100.0, 1e3)
+    assert axis["values"] == ("1e-3", "1e-2", "0.1", "1", "10", "100", "1e3")
+    assert decade_axis((0.1, 1.0))["values"] == ("0.1", "1")
+
+
+def test_frames_without_a_value_reach_the_chart_as_gaps() -> None:
+    from app.plots import chart_data
+
+    fps = np.array([np.nan, 20.0, 21.0, np.nan, np.nan, 19.0])  # two dropped frames
+    x, values, line = chart_data(6, [fps], 5, (0.0, 30.0))
+    assert values[:6] == [None, 20.0, 21.0, None, None, 19.0]  # null: uPlot breaks the line
+    assert len(x) == len(values) == len(line) and line.count(None) == 6
+
+
 def test_the_cursor_line_stands_at_the_current_frame() -> None:
     from app.plots import CURSOR_OFFSETS, with_cursor
 
@@ -501,7 +529,7 @@ def test_status_shows_the_in_app_and_trackers_alone_rates() -> None:
     tracked = np.array([np.nan, 0.05, 0.05, 0.05])
     played = np.array([np.nan, np.nan, 0.1, 0.1])
     assert rates_text(tracked, played, 3) == (
-        "playing 10.0 frames/s in the app · trackers alone 20.0 frames/s"
+        "played at 10.0 frames/s in the app · trackers alone 20.0 frames/s"
     )
     assert rates_text(tracked, np.full(4, np.nan), 3) == ""  # nothing played
 
@@ -978,3 +1006,98 @@ def test_shown_paths_hides_every_absolute_server_path(tmp_path: Path) -> None:
     shown = shown_paths(text, [root], [tmp_path / "sessions"])
     assert str(tmp_path) not in shown and "/etc" not in shown
     assert "data/car/x.mp4" in shown and "'sessions/b/s.mcap'" in shown and "passwd" in shown
+
+
+def test_shown_paths_leaves_urls_intact(tmp_path: Path) -> None:
+    from app.paths import shown_paths
+
+    root = (tmp_path / "data").resolve()
+    urls = ("rtsp://cam.local:8554/live/main", "http://example.com/data/x.mp4", "https://h/a/b")
+    text = f"cannot open {urls[0]} (timeout); {urls[1]} and {urls[2]}: see {root}/car/y.mp4"
+    shown = shown_paths(text, [root, Path("/data")], [tmp_path / "sessions"])
+    assert all(url in shown for url in urls), shown
+    assert "data/car/y.mp4" in shown and str(tmp_path) not in shown
+    assert "file://passwd" in shown_paths("file:///etc/passwd", [root])  # a server file: hidden
+
+
+def test_a_reopened_session_shows_the_preset_it_was_recorded_with(studio) -> None:
+    first, _ = _open_tab(studio, tab_id=1)
+    _set(first.panels.sequence.preset, "strcf")
+    _set(first.panels.sequence.path, "demo")
+    _click(first.panels.sequence.open_path)
+    assert first.wait_idle()
+    assert first.controller.run.params.name == "strcf"
+    _drag(first, _demo_boxes()["A"])
+    recorded = first.controller.run.session_path
+    studio.close_tab(1)
+
+    tab, _ = _open_tab(studio, tab_id=2)
+    assert tab.panels.sequence.preset.value == "autotrack"  # the server's default
+    _click(tab.panels.session.refresh)
+    assert tab.wait_idle()
+    _set(tab.panels.session.sessions, recorded.name)
+    _click(tab.panels.session.reopen)
+    assert tab.wait_idle()
+    assert tab.controller.run.params.name == "strcf"
+    assert tab.panels.sequence.preset.value == "strcf"  # not the default it showed
+    assert tab.controller.preset_name == "strcf"  # and the next sequence opened uses it
+
+
+def test_load_boxes_json_follows_the_open_source(studio, tmp_path: Path) -> None:
+    from app.live import LiveControl
+    from tests.test_app_live import _demo_video
+
+    tab, _ = _open_tab(studio)
+    boxes_json = tab.panels.targets.boxes_json
+    assert boxes_json.visible and not boxes_json.disabled  # the demo has one
+    media = tmp_path / "sessions" / "media"
+    media.mkdir()
+    _demo_video(media)
+    tab.live = LiveControl(tab.controller, allowed=True)  # as --allow-live gives it
+    tab.worker.submit(tab.live.open_source, "sessions/media/flight.avi")
+    _wait_for(lambda: tab.live.state == "preview", timeout=10)
+    _wait_for(lambda: not boxes_json.visible, timeout=5)  # not the demo's any more
+    assert tab.live.state == "preview" and tab.controller.boxes_path is None
+    tab.worker.submit(tab.live.stop)
+    assert tab.wait_idle()
+
+
+def test_a_tab_can_reopen_the_session_it_is_recording(studio) -> None:
+    tab, channel = _open_tab(studio)
+    _drag(tab, _demo_boxes()["A"])
+    _set(tab.panels.playback.frame, 4)
+    assert tab.wait_idle()
+    own = tab.controller.run.session_path
+    _click(tab.panels.session.refresh)
+    assert tab.wait_idle()
+    _set(tab.panels.session.sessions, own.name)
+    _click(tab.panels.session.reopen)
+    assert tab.wait_idle()
+    assert not [note for note, error in channel.notes if error], channel.notes  # not "another tab"
+    controller = tab.controller
+    assert controller.message.startswith(f"Reopened {own.name}") and controller.cursor == 3
+    assert list(controller.run.targets) == ["T1"] and controller.run.session_path != own
+    assert studio.recordings.writer_of(own) is None
+
+
+def test_show_ground_truth_redraws_the_canvas_at_once(tmp_path: Path) -> None:
+    if not (SHARED_SEQUENCES / "DTB70" / "Gull1").is_dir():
+        pytest.skip("../shared/data/sequences is not present")
+    from app.server import StudioServer
+    from tests.test_app_controller import _first_frames
+
+    sequence = _first_frames(SHARED_SEQUENCES / "DTB70" / "Gull1", tmp_path / "Gull1", 3)
+    studio = StudioServer(
+        AppConfig(sequence=sequence, port=_free_port(), sessions_dir=tmp_path / "sessions")
+    )
+    try:
+        tab, channel = _open_tab(studio)
+        stats = tab.display.stats
+        _wait_for(lambda: stats.canvas_frames >= 1)
+        time.sleep(0.5)  # nothing else to draw
+        drawn = stats.canvas_frames
+        _set(tab.panels.targets.show_truth, True)  # no command runs: only the checkbox
+        _wait_for(lambda: stats.canvas_frames > drawn, timeout=5.0)
+        assert not [note for note, error in channel.notes if error]
+    finally:
+        studio.stop()

@@ -267,3 +267,20 @@ def test_a_stream_that_disconnects_mid_run_says_so_and_keeps_the_recording(
     session = open_session(path)
     assert session.source == camera.url and session.image_count == tracked + 1
     assert controller.run.frames.recorded_indices[-1] == controller.cursor
+
+
+def test_the_live_source_is_shown_relative_to_its_allowed_folder(
+    tmp_path: Path, media: Path
+) -> None:
+    controller, live = _live_tab(tmp_path)
+    live.open_source(str(media / "flight.avi"))  # typed as an absolute path
+    shown = [controller.message, live.snapshot().status]
+    live.freeze()
+    shown += [controller.message, live.snapshot().status]
+    live.stop()
+    shown.append(controller.message)
+    for text in shown:
+        assert str(tmp_path) not in text, text
+    assert "Live: media/flight.avi." in shown[0] and "**media/flight.avi**" in shown[1]
+    assert "**media/flight.avi**" in shown[3]
+    controller.close()

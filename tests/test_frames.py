@@ -172,3 +172,21 @@ def test_ffmpeg_options_alone_stop_a_playlist(tmp_path, monkeypatch):
         assert plain.isOpened() and plain.grab()
     finally:
         plain.release()
+
+
+def test_a_cut_video_counts_the_frames_it_holds_not_its_header(tmp_path):
+    path = tmp_path / "clip.avi"
+    writer = cv2.VideoWriter(str(path), cv2.VideoWriter_fourcc(*"MJPG"), 12.0, (64, 48))
+    for index in range(40):
+        writer.write(np.full((48, 64, 3), 6 * index, np.uint8))
+    writer.release()
+    whole = path.read_bytes()
+    cut = tmp_path / "cut.avi"  # a copy stopped halfway: its header still says 40 frames
+    cut.write_bytes(whole[: len(whole) // 2])
+    assert int(cv2.VideoCapture(str(cut)).get(cv2.CAP_PROP_FRAME_COUNT)) == 40
+
+    source = open_frames(cut)
+    assert 2 < len(source) < 40
+    last = source.read(len(source) - 1)  # the last frame counted decodes: playing ends there
+    assert float(last.mean()) == pytest.approx(6 * (len(source) - 1), abs=3)
+    source.close()

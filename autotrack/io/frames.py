@@ -216,7 +216,7 @@ class VideoFrames(FrameSource):
         self.fps = fps if np.isfinite(fps) and fps > 0 else None
         self._next_index = 0
         self._cache: OrderedDict[int, np.ndarray] = OrderedDict()
-        if self._count <= 0:
+        if self._count <= 0 or not self._last_frame_decodes():
             self._count = self._count_by_decoding()
 
     def _open(self) -> cv2.VideoCapture:
@@ -225,6 +225,14 @@ class VideoFrames(FrameSource):
             capture.release()
             raise InputError(f"cannot open video {self.path} (unsupported format or corrupt file)")
         return capture
+
+    def _last_frame_decodes(self) -> bool:
+        """Whether the frame the header announces last is there (a cut or badly muxed file
+        announces more frames than it holds: playing it would fail before its end)."""
+        self._capture.set(cv2.CAP_PROP_POS_FRAMES, self._count - 1)
+        there = self._capture.grab()
+        self._rewind()
+        return there
 
     def _count_by_decoding(self) -> int:
         count = 0
