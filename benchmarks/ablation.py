@@ -50,6 +50,7 @@ ABLATION: dict[str, dict] = {
     "+ thin-target scale model": {"scale_model_min_side": PRESETS[PLUS].scale_model_min_side},
     "+ aspect filter": {"num_aspects": 17},
     "+ velocity prediction": {"velocity_weight": 1.0},
+    "+ long-term memory": {"memory_rate": 0.01, "distractor_ratio": 0.5},
 }
 """Each change of `autotrack+` on its own on top of the faithful preset (the acting ASR needs the
 bounded variation, re-detection needs the gate), as Table 2 adds ASR and ATR to STRCF."""
@@ -67,6 +68,7 @@ SENSITIVE = (
 CANDIDATES: dict[str, dict] = {
     f"{PLUS} + aspect filter": ABLATION["+ aspect filter"],
     f"{PLUS} + velocity prediction": ABLATION["+ velocity prediction"],
+    f"{PLUS} + long-term memory": ABLATION["+ long-term memory"],
 }
 """Switches measured on top of `autotrack+` but left out of the preset (docs/benchmarks.md);
 their parameters' sensitivity is taken around these variants."""
@@ -267,7 +269,8 @@ def build_tables(sequences, results: dict, table: dict[str, dict]) -> str:
             [*ABLATION, PLUS, WITHOUT_ASR, WITHOUT_VARIATION, *CANDIDATES],
             [
                 *("faithful", "+RV", "+RV+ASR", "+gate", "+gate+redet", "+scale", "+aspect"),
-                *("+velocity", PLUS, "+ no ASR", "+ no RV/ASR", "+ + aspect", "+ + velocity"),
+                *("+velocity", "+memory", PLUS, "+ no ASR", "+ no RV/ASR", "+ + aspect"),
+                *("+ + velocity", "+ + memory"),
             ],
             strict=True,
         )

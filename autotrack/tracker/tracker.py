@@ -17,7 +17,7 @@ import numpy as np
 from autotrack.errors import BoxError, InputError
 from autotrack.params import TrackerParams
 from autotrack.result import TrackResult
-from autotrack.tracker import dcf, redetect, regularization, robust
+from autotrack.tracker import dcf, memory, redetect, regularization, robust
 from autotrack.tracker.aspect import AspectFilter
 from autotrack.tracker.features import extract_features, feature_dim, is_grey, load_colour_table
 from autotrack.tracker.sampling import search_patch
@@ -143,6 +143,8 @@ class AutoTrack:
         xf = self._features_spectrum(image)
         self.filter_f = np.zeros_like(xf)
         self.filter_f, theta = self._train(xf, theta_start=0.0, theta_ref=0.0)
+        self.memory = memory.LongTermMemory(self.filter_f, p.memory_rate) if p.memory_rate else None
+        self.peak_separation = max(2.0, 3.0 * sigma)  # beyond the label's main lobe, in cells
         self.scale_filter.update(image, self.position, self.scale, best=None)
         self.aspect_filter = self._start_aspect_filter(image)
         self.confidence = (
@@ -192,6 +194,14 @@ class AutoTrack:
         zf = self._features_spectrum(image)
         response = dcf.detection_response(self.filter_f, zf, self.grid_size)
         disp_row, disp_col, peak_score = dcf.newton_peak(response, p.newton_iterations)
+        ambiguous = False
+        if self.memory is not None:  # a look-alike in the search region: ask the memory
+            chosen, ambiguous = memory.disambiguate(
+                response, self.memory.response(zf, self.grid_size), p.distractor_ratio,
+                self.peak_separation,
+            )  # fmt: skip
+            if chosen is not None:
+                disp_row, disp_col, peak_score = chosen
         confident = self._is_confident(peak_score, response)
         if not confident and p.redetect_span:
             found = self._redetect(image, peak_score)
@@ -226,6 +236,8 @@ class AutoTrack:
             xf = dcf.shift_spectrum(zf, cells[0], cells[1], self.grid_size)
             theta_start = p.zeta if p.adaptive_temporal else p.fixed_theta
             self.filter_f, theta = self._train(xf, theta_start, theta_ref)
+            if self.memory is not None and not ambiguous:
+                self.memory.learn(self.filter_f)
         if confident:
             self.scale_filter.update(image, self.position, self.scale, best_scale)
             if self.aspect_filter is not None:
