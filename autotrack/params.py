@@ -128,7 +128,8 @@ class TrackerParams:
     """Long-term appearance memory (memory.LongTermMemory, after LCT): the running average of the
     learnt filters, at this rate per learnt, unambiguous frame; when the response has a second
     distinct peak the peak with the most joint evidence of both filters is taken. 0 = off. 0.01:
-    LCT's long-term learning rate, a memory of ~100 learnt frames (10 s at 10 fps)."""
+    LCT's long-term learning rate, a memory of ~100 learnt frames (10 s at 10 fps); in
+    `autotrack+`."""
     distractor_ratio: float = 0.5
     """A second local maximum of the response at least this fraction of the first counts as a
     distractor (memory.distinct_peaks). 0.5: half the target's own peak, the level above which
@@ -222,6 +223,7 @@ PRESETS: dict[str, TrackerParams] = {
         confidence_gate=0.7,
         redetect_span=3.0,
         scale_model_min_side=16.0,
+        memory_rate=0.01,
     ),
 }
 """The paper's ablation (Table 2): STRCF baseline, +ASR, +ATR, the full AutoTrack (the authors'

@@ -144,7 +144,7 @@ class AutoTrack:
         self.filter_f = np.zeros_like(xf)
         self.filter_f, theta = self._train(xf, theta_start=0.0, theta_ref=0.0)
         self.memory = memory.LongTermMemory(self.filter_f, p.memory_rate) if p.memory_rate else None
-        self.peak_separation = max(2.0, 3.0 * sigma)  # beyond the label's main lobe, in cells
+        self.peak_separation = max(2.0, min(self.region_size) / 2.0)  # another object, in cells
         self.scale_filter.update(image, self.position, self.scale, best=None)
         self.aspect_filter = self._start_aspect_filter(image)
         self.confidence = (
