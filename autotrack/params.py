@@ -124,6 +124,16 @@ class TrackerParams:
     """Search centred at the last position plus this fraction of the last confident frame's
     motion (a constant-velocity prediction); 0 = the release (the last position). 1: constant
     velocity. Measured, not in `autotrack+` (docs/tracker.md)."""
+    memory_rate: float = 0.0
+    """Long-term appearance memory (memory.LongTermMemory, after LCT): the running average of the
+    learnt filters, at this rate per learnt, unambiguous frame; when the response has a second
+    distinct peak the peak with the most joint evidence of both filters is taken. 0 = off. 0.01:
+    LCT's long-term learning rate, a memory of ~100 learnt frames (10 s at 10 fps); in
+    `autotrack+`."""
+    distractor_ratio: float = 0.5
+    """A second local maximum of the response at least this fraction of the first counts as a
+    distractor (memory.distinct_peaks). 0.5: half the target's own peak, the level above which
+    a response is read as multi-modal (a single target's sidelobes stay well below it)."""
     num_aspects: int = 0
     """Width / height ratios sampled by the aspect filter (aspect.AspectFilter: DSST's scale
     filter along the other axis of the (width, height) scale space), `scale_step` apart; 0 = the
@@ -147,6 +157,8 @@ class TrackerParams:
             problems.append("num_scales must be >= 1 and scale_step > 1")
         if not 0 < self.variation_floor <= 1 or not 0 < self.confidence_memory <= 1:
             problems.append("variation_floor and confidence_memory must be in (0, 1]")
+        if not 0 <= self.memory_rate <= 1 or not 0 < self.distractor_ratio <= 1:
+            problems.append("memory_rate must be in [0, 1] and distractor_ratio in (0, 1]")
         if self.num_aspects < 0 or self.velocity_weight < 0:
             problems.append("num_aspects and velocity_weight must be >= 0")
         if self.confidence_gate < 0 or self.redetect_span < 0 or self.scale_model_min_side < 0:
@@ -190,6 +202,7 @@ class TrackerParams:
             or self.scale_model_min_side
             or self.num_aspects
             or self.velocity_weight
+            or self.memory_rate
         )
 
     def with_colour_table(self, path: str | Path | None) -> TrackerParams:
@@ -210,6 +223,7 @@ PRESETS: dict[str, TrackerParams] = {
         confidence_gate=0.7,
         redetect_span=3.0,
         scale_model_min_side=16.0,
+        memory_rate=0.01,
     ),
 }
 """The paper's ablation (Table 2): STRCF baseline, +ASR, +ATR, the full AutoTrack (the authors'

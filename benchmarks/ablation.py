@@ -50,6 +50,7 @@ ABLATION: dict[str, dict] = {
     "+ thin-target scale model": {"scale_model_min_side": PRESETS[PLUS].scale_model_min_side},
     "+ aspect filter": {"num_aspects": 17},
     "+ velocity prediction": {"velocity_weight": 1.0},
+    "+ long-term memory": {"memory_rate": PRESETS[PLUS].memory_rate},
 }
 """Each change of `autotrack+` on its own on top of the faithful preset (the acting ASR needs the
 bounded variation, re-detection needs the gate), as Table 2 adds ASR and ATR to STRCF."""
@@ -61,6 +62,8 @@ SENSITIVE = (
     "delta",
     "variation_floor",
     "scale_model_min_side",
+    "memory_rate",
+    "distractor_ratio",
 )
 """The parameters `autotrack+` uses or adds (delta is the release's, but it acts only here)."""
 
@@ -84,9 +87,13 @@ def plus_overrides() -> dict:
 
 WITHOUT_ASR = f"{PLUS} without acting ASR"
 """Leave-one-out of the change whose effect on the mean is smallest and least certain."""
+WITHOUT_MEMORY = f"{PLUS} without long-term memory"
+"""Leave-one-out of the newest change: `autotrack+` as it was before the memory was adopted."""
 WITHOUT_VARIATION = f"{PLUS} without robust variation and acting ASR"
 """Leave-one-out of the two changes to the release's regularisation (the acting ASR needs the
 bounded variation): the gate, re-detection and the scale model on the release's ASR and ATR."""
+
+LEAVE_OUTS = (WITHOUT_ASR, WITHOUT_MEMORY, WITHOUT_VARIATION)
 
 
 def variants(sensitivity: bool) -> dict[str, dict]:
@@ -94,6 +101,7 @@ def variants(sensitivity: bool) -> dict[str, dict]:
     table = dict(ABLATION)
     table[PLUS] = plus_overrides()
     table[WITHOUT_ASR] = {**plus_overrides(), "acting_asr": False}
+    table[WITHOUT_MEMORY] = {**plus_overrides(), "memory_rate": 0.0}
     table[WITHOUT_VARIATION] = {**plus_overrides(), "acting_asr": False, "robust_variation": False}
     for label, extra in CANDIDATES.items():
         table[label] = {**plus_overrides(), **extra}
@@ -173,7 +181,7 @@ def run_all(
         return {k: v for k, v in results.items() if len(v) == len(sequences)}
     # The faithful preset and autotrack+ first, then the ablation rows, CSRT, and the
     # sensitivity runs; within a variant the longest sequences first (balances the pool).
-    priority = [FAITHFUL, PLUS, *ABLATION, WITHOUT_ASR, WITHOUT_VARIATION, *CANDIDATES, "csrt"]
+    priority = [FAITHFUL, PLUS, *ABLATION, *LEAVE_OUTS, *CANDIDATES, "csrt"]
     priority += list(folders)
     todo.sort(key=lambda item: (priority.index(item[0]), -len(item[2])))
     os.environ.update(SINGLE_THREAD_ENVIRONMENT)
@@ -237,7 +245,7 @@ def build_tables(sequences, results: dict, table: dict[str, dict]) -> str:
         "|---|---|---|---|---|---|---|",
     ]
     base_p, base_auc = _mean(faithful, names)
-    order = [*ABLATION, PLUS, WITHOUT_ASR, WITHOUT_VARIATION, *CANDIDATES, "csrt"]
+    order = [*ABLATION, PLUS, *LEAVE_OUTS, *CANDIDATES, "csrt"]
     labels = [label for label in order if label in results]
     for label in labels:
         p, a = _mean(scores[label], names)
@@ -264,10 +272,11 @@ def build_tables(sequences, results: dict, table: dict[str, dict]) -> str:
     columns = [label for label in labels if label != "csrt"]
     short = dict(
         zip(
-            [*ABLATION, PLUS, WITHOUT_ASR, WITHOUT_VARIATION, *CANDIDATES],
+            [*ABLATION, PLUS, *LEAVE_OUTS, *CANDIDATES],
             [
                 *("faithful", "+RV", "+RV+ASR", "+gate", "+gate+redet", "+scale", "+aspect"),
-                *("+velocity", PLUS, "+ no ASR", "+ no RV/ASR", "+ + aspect", "+ + velocity"),
+                *("+velocity", "+memory", PLUS, "+ no ASR", "+ no memory", "+ no RV/ASR"),
+                *("+ + aspect", "+ + velocity"),
             ],
             strict=True,
         )

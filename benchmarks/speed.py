@@ -274,6 +274,10 @@ def main() -> int:
     if result is not None and not args.skip_guard:
         if args.max_frames:
             print("\nregression guard skipped: it needs whole sequences (no --max-frames)")
+        elif not result["boxes"]:
+            print(
+                "\nregression guard skipped: it checks the faithful autotrack (not in --trackers)"
+            )
         else:
             ok = guard(result["boxes"])
             print("guard:", "PASS" if ok else "FAIL: results changed (see above)")

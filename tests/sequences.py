@@ -110,3 +110,40 @@ def accelerating_target_sequence(
         frames.append(np.clip(frame, 0, 255).astype(np.uint8))
         boxes.append((left, top, target_size, target_size))
     return GeneratedSequence(frames=frames, boxes=np.array(boxes, dtype=np.float64))
+
+
+def passing_distractor_sequence(
+    num_frames: int = 70,
+    size_hw: tuple[int, int] = (200, 360),
+    target_size: int = 36,
+    crossing_frames: tuple[int, int] = (20, 50),
+    seed: int = 5,
+) -> GeneratedSequence:
+    """A target drifting slowly right while a look-alike (the same colours and border, another
+    pattern) crosses it right to left, in front of it, between `crossing_frames`; the look-alike
+    then goes on left, so a tracker that followed it ends far from the target."""
+    rng = np.random.default_rng(seed)
+    height, width = size_hw
+    background = _clutter(rng, height, width)
+    texture = _target_texture(rng, target_size)
+    lookalike = _target_texture(rng, target_size)
+    first, last = crossing_frames
+    cy = height // 2
+    frames, boxes = [], []
+    for index in range(num_frames):
+        target_x = width * 0.45 + 0.3 * index
+        # The look-alike meets the target at the middle of the crossing frames.
+        speed = 2.0 * target_size / max(last - first, 1)
+        meet = (first + last) / 2.0
+        lookalike_x = width * 0.45 + 0.3 * meet - speed * (index - meet)
+        frame = background.copy()
+        for x, pattern in ((target_x, texture), (lookalike_x, lookalike)):
+            left, top = int(round(x - target_size / 2)), cy - target_size // 2
+            lo, hi = max(left, 0), min(left + target_size, width)
+            if hi > lo:
+                frame[top : top + target_size, lo:hi] = pattern[:, lo - left : hi - left]
+        frames.append(np.clip(frame, 0, 255).astype(np.uint8))
+        boxes.append(
+            (round(target_x - target_size / 2), cy - target_size // 2, target_size, target_size)
+        )
+    return GeneratedSequence(frames=frames, boxes=np.array(boxes, dtype=np.float64))

@@ -231,7 +231,7 @@ DEV_SUBSET = (
 @needs_sequences
 def test_plus_is_not_worse_than_the_faithful_preset_on_the_mean_over_dev_sequences():
     # Means over many sequences, never single ones: the tracker is chaotic under rounding, and
-    # autotrack+'s measured gain (+0.013 AUC, +0.007 P@20 on all 18, docs/benchmarks.md) is
+    # autotrack+'s measured gain (+0.015 AUC, +0.011 P@20 on all 18, docs/benchmarks.md) is
     # within that noise across CPUs. So no gain is asserted, only that autotrack+ is not clearly
     # worse: a broken mechanism (a gate that never learns, re-detection that jumps to clutter)
     # costs far more than 0.03 on the mean, the chaos of one machine against another far less.

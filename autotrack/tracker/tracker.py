@@ -17,7 +17,7 @@ import numpy as np
 from autotrack.errors import BoxError, InputError
 from autotrack.params import TrackerParams
 from autotrack.result import TrackResult
-from autotrack.tracker import dcf, redetect, regularization, robust
+from autotrack.tracker import dcf, memory, redetect, regularization, robust
 from autotrack.tracker.aspect import AspectFilter
 from autotrack.tracker.features import extract_features, feature_dim, is_grey, load_colour_table
 from autotrack.tracker.sampling import search_patch
@@ -143,6 +143,8 @@ class AutoTrack:
         xf = self._features_spectrum(image)
         self.filter_f = np.zeros_like(xf)
         self.filter_f, theta = self._train(xf, theta_start=0.0, theta_ref=0.0)
+        self.memory = memory.LongTermMemory(self.filter_f, p.memory_rate) if p.memory_rate else None
+        self.peak_separation = max(2.0, min(self.region_size) / 2.0)  # another object, in cells
         self.scale_filter.update(image, self.position, self.scale, best=None)
         self.aspect_filter = self._start_aspect_filter(image)
         self.confidence = (
@@ -172,15 +174,7 @@ class AutoTrack:
 
     def update(self, frame: np.ndarray) -> TrackResult:
         """Track the target into `frame`; returns the new box and the filter's signals."""
-        if self.frame_number == 0:
-            raise InputError("call init(frame, box) before update(frame)")
-        image = _as_image(frame)
-        if image.shape[:2] != self.image_size_hw:
-            raise InputError(
-                f"frame size {image.shape[1]}x{image.shape[0]} differs from the first frame's "
-                f"{self.image_size_hw[1]}x{self.image_size_hw[0]}"
-            )
-        image = self._prepare(image)
+        image = self._checked_frame(frame)
         p = self.params
         self.frame_number += 1
         start = self.position
@@ -192,6 +186,9 @@ class AutoTrack:
         zf = self._features_spectrum(image)
         response = dcf.detection_response(self.filter_f, zf, self.grid_size)
         disp_row, disp_col, peak_score = dcf.newton_peak(response, p.newton_iterations)
+        chosen, ambiguous = self._disambiguate(response, zf)
+        if chosen is not None:
+            disp_row, disp_col, peak_score = chosen
         confident = self._is_confident(peak_score, response)
         if not confident and p.redetect_span:
             found = self._redetect(image, peak_score)
@@ -226,6 +223,8 @@ class AutoTrack:
             xf = dcf.shift_spectrum(zf, cells[0], cells[1], self.grid_size)
             theta_start = p.zeta if p.adaptive_temporal else p.fixed_theta
             self.filter_f, theta = self._train(xf, theta_start, theta_ref)
+            if self.memory is not None and not ambiguous:
+                self.memory.learn(self.filter_f)
         if confident:
             self.scale_filter.update(image, self.position, self.scale, best_scale)
             if self.aspect_filter is not None:
@@ -287,6 +286,29 @@ class AutoTrack:
                     self.base_window, variation, self.region, p.delta
                 )
         return variation, eta, aberrant, theta_ref
+
+    def _checked_frame(self, frame: np.ndarray) -> np.ndarray:
+        """A frame of the first frame's size, prepared like it; InputError otherwise."""
+        if self.frame_number == 0:
+            raise InputError("call init(frame, box) before update(frame)")
+        image = _as_image(frame)
+        if image.shape[:2] != self.image_size_hw:
+            raise InputError(
+                f"frame size {image.shape[1]}x{image.shape[0]} differs from the first frame's "
+                f"{self.image_size_hw[1]}x{self.image_size_hw[0]}"
+            )
+        return self._prepare(image)
+
+    def _disambiguate(
+        self, response: np.ndarray, zf: np.ndarray
+    ) -> tuple[tuple[float, float, float] | None, bool]:
+        """With a look-alike in the search region, the peak the long-term memory supports
+        (memory.disambiguate): (that peak or None, whether a distractor is present)."""
+        if self.memory is None:
+            return None, False
+        memory_response = self.memory.response(zf, self.grid_size)
+        ratio, separation = self.params.distractor_ratio, self.peak_separation
+        return memory.disambiguate(response, memory_response, ratio, separation)
 
     def _is_confident(self, peak_score: float, response: np.ndarray) -> bool:
         """Whether this detection clears the confidence gate (always True without a gate)."""

@@ -1,0 +1,81 @@
+"""Long-term appearance memory and distractor disambiguation (memory.py, `memory_rate`)."""
+
+from __future__ import annotations
+
+from dataclasses import replace
+
+import numpy as np
+import pytest
+
+from autotrack import AutoTrack
+from autotrack.errors import InputError
+from autotrack.evaluation.metrics import center_errors
+from autotrack.params import PRESETS, TrackerParams
+from autotrack.tracker import dcf, memory
+from tests.sequences import passing_distractor_sequence
+
+
+def _bump(grid, centre, height, sigma=1.2):
+    rows = dcf.centred_frequencies(grid[0])[:, None] - centre[0]
+    cols = dcf.centred_frequencies(grid[1])[None, :] - centre[1]
+    return height * np.exp(-0.5 * (rows**2 + cols**2) / sigma**2)
+
+
+def test_distinct_peaks_finds_a_second_mode_and_not_a_shoulder():
+    grid = (40, 40)
+    two_modes = _bump(grid, (0, 0), 1.0) + _bump(grid, (6, -8), 0.8)
+    peaks = memory.distinct_peaks(two_modes, ratio=0.5, separation=3.0)
+    assert peaks == [(0, 0), (6, 40 - 8)]
+    assert memory.distinct_peaks(two_modes, ratio=0.9, separation=3.0) == [(0, 0)]
+    shoulder = _bump(grid, (0, 0), 1.0) + _bump(grid, (1, 1), 0.8)
+    assert len(memory.distinct_peaks(shoulder, ratio=0.5, separation=3.0)) == 1
+
+
+def test_the_memory_decides_between_two_peaks_and_the_sub_cell_peak_is_refined():
+    grid = (40, 40)
+    short_term = _bump(grid, (0, 0), 1.0) + _bump(grid, (5.3, -7), 0.9)
+    long_term = _bump(grid, (0, 0), 0.3) + _bump(grid, (5, -7), 1.0)
+    chosen, ambiguous = memory.disambiguate(short_term, long_term, 0.5, 3.0)
+    assert ambiguous and chosen is not None
+    assert chosen[0] == pytest.approx(5.3, abs=0.1) and chosen[1] == pytest.approx(-7, abs=0.05)
+    # The memory agreeing with the short-term filter changes nothing.
+    agreeing = _bump(grid, (0, 0), 1.0) + _bump(grid, (5, -7), 0.3)
+    assert memory.disambiguate(short_term, agreeing, 0.5, 3.0) == (None, True)
+    single = _bump(grid, (2, 3), 1.0)
+    assert memory.disambiguate(single, long_term, 0.5, 3.0) == (None, False)
+
+
+def test_memory_is_a_slow_running_average_of_the_learnt_filters():
+    first = np.ones((2, 4, 3), np.complex64)
+    long_term = memory.LongTermMemory(first, rate=0.1)
+    long_term.learn(np.zeros_like(first))
+    np.testing.assert_allclose(long_term.filter_f, 0.9)
+    assert first[0, 0, 0] == 1  # the tracker's filter is not aliased
+
+
+def _centre_errors(params: TrackerParams, sequence) -> np.ndarray:
+    tracker = AutoTrack(params)
+    boxes = [tracker.init(sequence.frames[0], sequence.boxes[0]).box]
+    boxes += [tracker.update(frame).box for frame in sequence.frames[1:]]
+    return center_errors(np.array(boxes), sequence.boxes)
+
+
+def test_memory_returns_to_the_target_after_a_look_alike_passed_in_front_of_it():
+    sequence = passing_distractor_sequence()
+    plus = PRESETS["autotrack+"]
+    assert plus.memory_rate == pytest.approx(0.01)
+    without = _centre_errors(replace(plus, memory_rate=0.0), sequence)
+    with_memory = _centre_errors(plus, sequence)
+    # Without the memory the tracker leaves with the look-alike; with it, it comes back.
+    assert without[-10:].min() > 40
+    assert with_memory[-10:].max() < 5
+    # Before the look-alike arrives the memory changes nothing.
+    np.testing.assert_array_equal(with_memory[:15], without[:15])
+
+
+def test_memory_is_off_in_the_faithful_presets_and_bad_values_are_refused():
+    assert all(p.memory_rate == 0 for name, p in PRESETS.items() if name != "autotrack+")
+    assert TrackerParams(memory_rate=0.01).beyond_release
+    for change in ({"memory_rate": -0.1}, {"memory_rate": 1.5}, {"distractor_ratio": 0}):
+        with pytest.raises(InputError):
+            TrackerParams(**change)
