@@ -15,7 +15,7 @@ from autotrack.localization.scene import load_scene
 from autotrack.params import preset
 from autotrack.pipeline import localize_sequence
 from autotrack.tracker.multi import MultiTracker
-from autotrack.tracker.target_process import WorkerError
+from autotrack.tracker.target_process import WorkerError, stop_idle_processes
 from tests import test_localize, test_multi
 from tests.test_multi import run
 
@@ -82,7 +82,7 @@ def test_a_childs_input_error_reaches_the_caller_and_the_tracker_goes_on(landmar
         assert set(tracker.update(frames[1])) == {"A", "B"}
 
 
-def test_children_stop_with_the_tracker_and_a_lost_child_is_named(landmarks_sequence):
+def test_a_lost_child_is_named_and_closed_trackers_lend_their_children(landmarks_sequence):
     frames, boxes, _ = landmarks_sequence
     tracker = MultiTracker(preset("autotrack"), processes=2)
     tracker.init(frames[0], boxes)
@@ -92,11 +92,15 @@ def test_children_stop_with_the_tracker_and_a_lost_child_is_named(landmarks_sequ
     with pytest.raises(WorkerError, match=f"tracking process {child.pid}"):
         tracker.update(frames[1])
     tracker.close()
-    stopped = MultiTracker(preset("autotrack"), processes=2)
-    stopped.init(frames[0], boxes)
-    process = stopped._children[0]._process
-    stopped.close()
-    assert process.poll() is not None
+    with MultiTracker(preset("autotrack"), processes=2) as first:
+        first.init(frames[0], boxes)
+        lent = first._children[0]
+    assert lent.pid != child.pid  # the dead child was not given back
+    with MultiTracker(preset("autotrack"), processes=2) as second:
+        assert second._children[0] is lent  # started once, reused
+        assert set(second.init(frames[0], boxes)) == set(boxes)
+    stop_idle_processes()
+    assert not lent.alive()
     with pytest.raises(InputError, match="processes must be at least 1"):
         MultiTracker(preset("autotrack"), processes=0)
 

@@ -20,7 +20,7 @@ import numpy as np
 from autotrack.errors import InputError
 from autotrack.params import TrackerParams
 from autotrack.result import TrackResult
-from autotrack.tracker.target_process import SharedFrame, TargetProcess
+from autotrack.tracker.target_process import SharedFrame, acquire_process, release_process
 from autotrack.tracker.tracker import AutoTrack
 
 Box = Sequence[float]
@@ -53,7 +53,7 @@ class MultiTracker:
         self._owners: dict[str, int] = {}  # every target: 0 here, i > 0 the i-th child
         self._frame_index = -1
         self._pool = ThreadPoolExecutor(max_workers=threads) if threads > 1 else None
-        self._children = [TargetProcess(params, colour_table) for _ in range(processes - 1)]
+        self._children = [acquire_process(params, colour_table) for _ in range(processes - 1)]
         self._shared_frame = SharedFrame() if self._children else None
 
     @property
@@ -134,7 +134,7 @@ class MultiTracker:
             self._pool.shutdown(wait=True)
             self._pool = None
         for child in self._children:
-            child.close()
+            release_process(child)
         self._children = []
         if self._shared_frame is not None:
             self._shared_frame.close()

@@ -4,24 +4,28 @@ Threads cannot do this well: a target's update is hundreds of short steps, and t
 small-array numpy work between the compiled kernels and the FFTs holds the GIL, so two threads
 serialise on it (see docs/benchmarks.md, Speed). A `TargetProcess` owns its own `AutoTrack`s in
 a child process. The parent writes each frame once into shared memory (`SharedFrame`, read by
-every child), sends a short command over a pipe and later collects the `TrackResult`s (a box,
-signals and three small maps each). The child runs the same code on the same inputs, so its
-results are bit for bit those of an in-process tracker.
+every child), sends a short command over a socket and later collects the `TrackResult`s (a
+box, signals and three small maps each). The child runs the same code on the same inputs, so
+its results are bit for bit those of an in-process tracker.
 
 A child is a fresh interpreter (`python -c ...`, talking over a socket pair), neither a fork
 (which would copy the parent's threads' locks: the app runs a web server) nor a
 `multiprocessing` spawn (which re-runs the caller's main script, unguarded in most scripts).
-It imports the tracker and loads the cached numba kernels once, in the background while the
-parent goes on, and uses as many OpenCV threads as the parent.
+It imports the tracker and loads the cached numba kernels once (~1 s on an idle machine, in
+the background while the parent goes on) and uses as many OpenCV threads as the parent. A
+closed MultiTracker gives its children back (`release_process`): the next one
+(`acquire_process`) starts at once, with no start-up to pay again.
 """
 
 from __future__ import annotations
 
+import atexit
 import contextlib
 import os
 import socket
 import subprocess
 import sys
+import threading
 import traceback
 from collections.abc import Mapping, Sequence
 from multiprocessing import resource_tracker
@@ -68,9 +72,7 @@ class SharedFrame:
 class TargetProcess:
     """A child process tracking some of the targets; commands are answered in order."""
 
-    def __init__(self, params: TrackerParams, colour_table: np.ndarray | None) -> None:
-        import cv2
-
+    def __init__(self) -> None:
         parent_end, child_end = socket.socketpair()
         self._process = subprocess.Popen(
             [sys.executable, "-c", _CHILD_MAIN, str(child_end.fileno())],
@@ -80,8 +82,22 @@ class TargetProcess:
         )
         child_end.close()
         self._connection = Connection(parent_end.detach())
-        self._connection.send((params, colour_table, cv2.getNumThreads()))
         self._pending = 0
+
+    @property
+    def pid(self) -> int:
+        """The child's process id."""
+        return self._process.pid
+
+    def alive(self) -> bool:
+        """Whether the child is still running."""
+        return self._process.poll() is None
+
+    def configure(self, params: TrackerParams, colour_table: np.ndarray | None) -> None:
+        """Drop every tracker and take these settings (and this process's OpenCV threads)."""
+        import cv2
+
+        self._send(("configure", params, colour_table, cv2.getNumThreads()))
 
     def start(self, target_id: str, frame: FrameHandle, box: Box) -> None:
         """Ask for a new tracker (or a restarted one) for `target_id` on `frame`."""
@@ -141,18 +157,8 @@ _CHILD_MAIN = (
 def serve(descriptor: int) -> None:
     """The child's loop on the socket `descriptor`: one answer per command until "stop" or the
     parent goes away."""
-    import cv2
-
-    from autotrack.tracker.tracker import AutoTrack
-
     connection = Connection(descriptor)
-    try:
-        params, colour_table, opencv_threads = connection.recv()
-    except (EOFError, OSError):
-        return
-    cv2.setNumThreads(opencv_threads)
-    trackers: dict[str, AutoTrack] = {}
-    frames = _AttachedFrames()
+    state = _ChildState()
     try:
         while True:
             try:
@@ -162,39 +168,48 @@ def serve(descriptor: int) -> None:
             if command[0] == "stop":
                 return
             try:
-                answer = _answer(command, trackers, frames, params, colour_table)
-                connection.send(("ok", answer))
+                connection.send(("ok", state.answer(command)))
             except Exception as error:  # sent back to the parent, which re-raises it
                 connection.send(("error", _picklable(error)))
     finally:
-        frames.close()
+        state.frames.close()
         connection.close()
 
 
-def _answer(
-    command: tuple,
-    trackers: dict,
-    frames: _AttachedFrames,
-    params: TrackerParams,
-    colour_table: np.ndarray | None,
-) -> Mapping[str, TrackResult]:
-    from autotrack.tracker.tracker import AutoTrack
+class _ChildState:
+    """What a child holds: its settings, its targets' trackers, its view of the frames."""
 
-    kind = command[0]
-    if kind == "start":
-        _, target_id, handle, box = command
-        tracker = AutoTrack(params, colour_table=colour_table)
-        result = tracker.init(frames.view(handle), box)
-        trackers[target_id] = tracker
-        return {target_id: result}
-    if kind == "update":
-        _, target_ids, handle = command
-        frame = frames.view(handle)
-        return {target_id: trackers[target_id].update(frame) for target_id in target_ids}
-    if kind == "remove":
-        trackers.pop(command[1], None)
-        return {}
-    raise ValueError(f"unknown command {kind!r}")
+    def __init__(self) -> None:
+        self.params: TrackerParams | None = None
+        self.colour_table: np.ndarray | None = None
+        self.trackers: dict = {}
+        self.frames = _AttachedFrames()
+
+    def answer(self, command: tuple) -> Mapping[str, TrackResult]:
+        from autotrack.tracker.tracker import AutoTrack
+
+        kind = command[0]
+        if kind == "configure":
+            import cv2
+
+            _, self.params, self.colour_table, opencv_threads = command
+            cv2.setNumThreads(opencv_threads)
+            self.trackers = {}
+            return {}
+        if kind == "start":
+            _, target_id, handle, box = command
+            tracker = AutoTrack(self.params, colour_table=self.colour_table)
+            result = tracker.init(self.frames.view(handle), box)
+            self.trackers[target_id] = tracker
+            return {target_id: result}
+        if kind == "update":
+            _, target_ids, handle = command
+            frame = self.frames.view(handle)
+            return {target_id: self.trackers[target_id].update(frame) for target_id in target_ids}
+        if kind == "remove":
+            self.trackers.pop(command[1], None)
+            return {}
+        raise ValueError(f"unknown command {kind!r}")
 
 
 class _AttachedFrames:
@@ -230,3 +245,54 @@ def _picklable(error: Exception) -> Exception:
         return error
     except Exception:
         return WorkerError("".join(traceback.format_exception(error)))
+
+
+IDLE_LIMIT = 4
+"""Idle children kept for the next MultiTracker (a child's start-up is paid once)."""
+_idle: list[TargetProcess] = []
+_idle_lock = threading.Lock()
+
+
+def acquire_process(params: TrackerParams, colour_table: np.ndarray | None) -> TargetProcess:
+    """An idle child if there is one (already started, kernels loaded), else a new one, set to
+    track with `params`."""
+    with _idle_lock:
+        while _idle:
+            child = _idle.pop()
+            if child.alive():
+                break
+            child.close()
+        else:
+            child = TargetProcess()
+    child.configure(params, colour_table)
+    return child
+
+
+def release_process(child: TargetProcess) -> None:
+    """Give a child back: its trackers are dropped and it waits for the next MultiTracker (or
+    it is stopped, when it failed or enough children wait already)."""
+    try:
+        while child.pending:
+            child.collect()
+        child.configure(TrackerParams(), None)  # drops the trackers
+        child.collect()
+    except Exception:
+        child.close()
+        return
+    with _idle_lock:
+        if len(_idle) < IDLE_LIMIT:
+            _idle.append(child)
+            return
+    child.close()
+
+
+def stop_idle_processes() -> None:
+    """Stop every idle child (at exit; the children also stop when this process goes away)."""
+    with _idle_lock:
+        children = list(_idle)
+        _idle.clear()
+    for child in children:
+        child.close()
+
+
+atexit.register(stop_idle_processes)
