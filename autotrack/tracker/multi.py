@@ -11,6 +11,7 @@ or reset later is numbered like the others.
 
 from __future__ import annotations
 
+import os
 from collections.abc import Callable, Iterable, Mapping, Sequence
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import replace
@@ -44,6 +45,8 @@ class MultiTracker:
             raise InputError(f"threads must be at least 1, got {threads}")
         if processes < 1:
             raise InputError(f"processes must be at least 1, got {processes}")
+        if processes > 1 and os.name != "posix":
+            raise InputError("tracking in several processes needs a POSIX system (Linux, macOS)")
         self.params = params
         self.colour_table = colour_table
         self.threads = threads
