@@ -8,8 +8,9 @@ Prints
    sequence's median fps, and the AutoTrack / CSRT ratio (median over sequences of the
    per-sequence ratio); tracking time only, frames decoded beforehand;
 2. four AutoTrack targets + the pose on a rendered 300-frame 1280x720 sequence, end to end from
-   the JPEG files (decoding and colour conversion included), on one thread and on two (two
-   threads: targets shared between two workers, the next frame decoded meanwhile);
+   the JPEG files (decoding and colour conversion included), on one thread, on two threads
+   (the targets shared between two workers) and in two processes (two targets in a child
+   process, `--processes 2`), with the CPU time per frame of each process;
 3. start-up: the time from launching a fresh Python process to its first tracked frame, for a
    first process with an empty kernel cache and a second one that finds it filled;
 4. the regression guard: AutoTrack's boxes against the pre-optimisation boxes kept in
@@ -111,8 +112,9 @@ def render_multi_sequence(folder: Path, frames: int) -> Path:
     return render_sequence(folder / spec.name, spec)
 
 
-def multi_target_pose(sequence: Path, threads: int) -> dict:
-    """Four targets + pose from the JPEG files: seconds per frame, decoding included."""
+def multi_target_pose(sequence: Path, threads: int, processes: int = 1) -> dict:
+    """Four targets + pose from the JPEG files: seconds per frame, decoding included, and the CPU
+    seconds per frame of this process and of its tracking children."""
     import cv2
 
     from autotrack.io.frames import open_frames
@@ -123,20 +125,44 @@ def multi_target_pose(sequence: Path, threads: int) -> dict:
     cv2.setNumThreads(1)
     scene = load_scene(sequence / "scene.json")
     boxes = json.loads((sequence / "boxes.json").read_text())
-    with open_frames(sequence) as source:  # warm-up: kernels loaded, files in the page cache
-        list(
-            localize_sequence([source.read(i) for i in range(3)], scene, boxes, preset("autotrack"))
-        )
+    params = preset("autotrack")
+    with open_frames(sequence) as source:
+        # Warm-up: kernels loaded, files in the page cache, the children started (a closed
+        # tracker gives them back for the next run, as an app or a second run would find them).
+        first = [source.read(i) for i in range(3)]
+        list(localize_sequence(first, scene, boxes, params, processes=processes))
         for index in range(len(source)):
             source.read_bgr(index)
     with open_frames(sequence) as source:
-        start = time.perf_counter()
+        children_before = _children_cpu()
+        start, cpu_start = time.perf_counter(), time.process_time()
         records = list(
-            localize_sequence(source, scene, boxes, preset("autotrack"), threads=threads)
+            localize_sequence(source, scene, boxes, params, threads=threads, processes=processes)
         )
-        elapsed = time.perf_counter() - start
+        elapsed, cpu = time.perf_counter() - start, time.process_time() - cpu_start
+        children = _children_cpu() - children_before
     valid = sum(bool(r.pose.valid) for r in records)
-    return {"seconds_per_frame": elapsed / len(records), "frames": len(records), "valid": valid}
+    frames = len(records)
+    return {
+        "seconds_per_frame": elapsed / frames,
+        "cpu_per_frame": cpu / frames,
+        "children_cpu_per_frame": children / frames,
+        "frames": frames,
+        "valid": valid,
+    }
+
+
+def _children_cpu() -> float:
+    """User + system CPU seconds of this process's running children (Linux /proc; 0 elsewhere)."""
+    total = 0.0
+    for stat in Path("/proc").glob("[0-9]*/stat"):
+        try:
+            fields = stat.read_text().rsplit(")", 1)[1].split()
+        except OSError:
+            continue
+        if int(fields[1]) == os.getpid():
+            total += (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
+    return total
 
 
 _FIRST_FRAME_SCRIPT = """
@@ -252,12 +278,18 @@ def main() -> int:
             print(
                 f"\nfour targets + pose, {args.multi_frames} frames of 1280x720 JPEG, end to end:"
             )
-            for threads in (1, 2):
-                multi = multi_target_pose(sequence, threads)
+            for threads, processes in ((1, 1), (2, 1), (1, 2)):
+                multi = multi_target_pose(sequence, threads, processes)
                 seconds = multi["seconds_per_frame"]
+                label = f"{threads} thread{'s' if threads > 1 else ''}" + (
+                    f", {processes} processes" if processes > 1 else ""
+                )
+                cpu = f"CPU {multi['cpu_per_frame'] * 1e3:.1f} ms/frame"
+                if processes > 1:
+                    cpu += f" here + {multi['children_cpu_per_frame'] * 1e3:.1f} in the child"
                 print(
-                    f"  {threads} thread{'s' if threads > 1 else ' '}: {seconds * 1e3:6.1f} ms/frame "
-                    f"= {1 / seconds:5.1f} frames/s ({multi['valid']}/{multi['frames']} valid poses)",
+                    f"  {label:<23}: {seconds * 1e3:6.1f} ms/frame = {1 / seconds:5.1f} frames/s "
+                    f"({cpu}; {multi['valid']}/{multi['frames']} valid poses)",
                     flush=True,
                 )
 

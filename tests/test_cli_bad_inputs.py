@@ -65,6 +65,7 @@ CASES = {
     "localize --fps 0": ["localize", "demo", "--fps", "0"],
     "localize --fps -5": ["localize", "demo", "--fps", "-5"],
     "localize --max-rms nan": ["localize", "demo", "--max-rms", "nan"],
+    "localize --processes 0": ["localize", "demo", "--processes", "0"],
     "synth --seed -1": ["synth", "fresh", "--seed", "-1"],
     # unreadable inputs
     "localize --init not UTF-8": ["localize", "demo", "--init", "not_utf8.json"],

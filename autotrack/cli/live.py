@@ -139,6 +139,7 @@ def run_localize_live(
             recording=_live_recording(args, scene_path),
             fps=reader.fps or DEFAULT_FPS,
             threads=args.threads,
+            tracker_processes=args.processes,
             map_window=0,  # the report needs boxes and poses only: memory stays flat
             **_pose_options(args),
         )

@@ -76,13 +76,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
         help=f"frame rate for timestamps (default: the video's, else {DEFAULT_FPS:g})",
     )
     parser.add_argument("--preset", default="autotrack", choices=sorted(PRESETS))
-    parser.add_argument(
-        "--threads",
-        type=int,
-        default=2,
-        help="track the landmarks on this many threads "
-        "(default 2; docs/benchmarks.md has the frame rates for 1 and 2 threads)",
-    )
+    _add_concurrency_arguments(parser)
     parser.add_argument(
         "--max-rms",
         type=float,
@@ -105,6 +99,24 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument("--quiet", action="store_true", help="no progress bar")
     add_live_arguments(parser)
     parser.set_defaults(func=run_localize)
+
+
+def _add_concurrency_arguments(parser: argparse.ArgumentParser) -> None:
+    """--threads, --processes."""
+    parser.add_argument(
+        "--threads",
+        type=int,
+        default=2,
+        help="track the landmarks on this many threads "
+        "(default 2; docs/benchmarks.md has the frame rates for 1 and 2 threads)",
+    )
+    parser.add_argument(
+        "--processes",
+        type=int,
+        default=1,
+        help="spread the landmarks over this many processes (this one and N-1 children: "
+        "parallel where threads share Python's lock; see docs/benchmarks.md, Speed)",
+    )
 
 
 def _add_pose_arguments(parser: argparse.ArgumentParser) -> None:
@@ -162,6 +174,8 @@ def _check_arguments(args: argparse.Namespace) -> None:
     finite(args.max_rms, "--max-rms", low=0)
     if args.threads < 1:
         raise InputError("--threads must be at least 1")
+    if args.processes < 1:
+        raise InputError("--processes must be at least 1")
     if not args.no_reacquire and args.no_refine:
         raise InputError("re-acquisition needs the refiner's templates: add --no-reacquire")
     if args.smooth_lag < 0:
@@ -219,6 +233,7 @@ def run_localize(args: argparse.Namespace) -> int:
             recording=recording,
             fps=fps,
             threads=args.threads,
+            processes=args.processes,
             refine_params=None if args.no_refine else RefineParams(),
             reacquire_params=None if args.no_reacquire else ReacquireParams(),
             map_window=0,  # the report needs boxes and poses only: memory stays flat

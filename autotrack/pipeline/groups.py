@@ -32,9 +32,10 @@ class _Group:
 class TrackerGroups:
     """The MultiTrackers of one pipeline; results carry the sequence's frame index."""
 
-    def __init__(self, params: TrackerParams, threads: int) -> None:
+    def __init__(self, params: TrackerParams, threads: int, processes: int = 1) -> None:
         self.params = params
         self.threads = threads
+        self.processes = processes
         self._groups: list[_Group] = []
 
     @property
@@ -64,7 +65,9 @@ class TrackerGroups:
             else:
                 fresh[target_id] = box
         if fresh:
-            tracker = MultiTracker(self.params, list(fresh), threads=self.threads)
+            tracker = MultiTracker(
+                self.params, list(fresh), threads=self.threads, processes=self.processes
+            )
             try:
                 results.update(tracker.init(frame, fresh))
             except Exception:
@@ -105,7 +108,7 @@ class TrackerGroups:
             self._leave(target_id, group)
 
     def close(self) -> None:
-        """Stop every tracker's threads."""
+        """Stop every tracker's threads and child processes."""
         for group in self._groups:
             group.tracker.close()
         self._groups.clear()

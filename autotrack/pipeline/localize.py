@@ -30,6 +30,7 @@ def localize_sequence(
     recording: Recording | None = None,
     fps: float | None = None,
     threads: int = 1,
+    processes: int = 1,
     refine_params: RefineParams | None = None,
     reacquire_params: ReacquireParams | None = None,
     map_window: int = 1,
@@ -42,7 +43,9 @@ def localize_sequence(
     `refine_params` turns on the sub-pixel refinement of the landmark points
     (`localization.refine`), `reacquire_params` the out-of-view gate and re-acquisition of lost
     landmarks (`localization.reacquire`; it uses the refiner's templates, so it turns refinement
-    on with default settings if needed). `map_window` (the Pipeline's): 1 keeps the maps of
+    on with default settings if needed). `threads` and `processes` run the landmarks'
+    trackers concurrently (the Pipeline's `tracker_threads`, `tracker_processes`).
+    `map_window` (the Pipeline's): 1 keeps the maps of
     the frame yielded only, 0 none.
     """
     if not isinstance(frames, FrameSource):
@@ -56,6 +59,7 @@ def localize_sequence(
         recording=recording,
         fps=fps,
         tracker_threads=threads,
+        tracker_processes=processes,
         refine_params=refine_params,
         reacquire_params=reacquire_params,
         map_window=map_window,

@@ -6,8 +6,8 @@ what the pipeline hands it. The command line (`track`, `localize`), `localize_se
 benchmark scripts and the app all drive this one class.
 
 Targets are named "T1", "T2", ... in the order they are added, whatever the caller (a deleted
-target's number is given to the next new one, so ids stay T1..Tn); a target
-that localises a scene landmark carries its id (`landmark_id`). Editing a box at an earlier
+target's number is given to the next new one, so ids stay T1..Tn); a target that localises a
+scene landmark carries its id (`landmark_id`). Editing a box at an earlier
 frame re-tracks only that target from there; the other targets keep their results and filters.
 """
 
@@ -64,6 +64,7 @@ class Pipeline:
         recording: Where to record the session (None: not recorded).
         fps: Frame rate of the log times (None: the frames' own, else the recorder's default).
         tracker_threads: Threads each MultiTracker may use for its targets.
+        tracker_processes: Processes each MultiTracker spreads its targets over (`MultiTracker`).
         refine_params: Sub-pixel landmark points (`localization.refine`; None: box centres).
         reacquire_params: Out-of-view gate and re-acquisition of lost landmarks
             (`localization.reacquire`; None: off). Both need a scene.
@@ -82,6 +83,7 @@ class Pipeline:
         recording: Recording | None = None,
         fps: float | None = None,
         tracker_threads: int = 1,
+        tracker_processes: int = 1,
         refine_params: RefineParams | None = None,
         reacquire_params: ReacquireParams | None = None,
         map_window: int = MAP_WINDOW,
@@ -106,7 +108,7 @@ class Pipeline:
         self.resumed_from: Path | None = None
         self.resume_frame = 0
         """After `resume`: the frame tracking continues from."""
-        self._groups = TrackerGroups(params, tracker_threads)
+        self._groups = TrackerGroups(params, tracker_threads, tracker_processes)
         self._posing = (
             None
             if scene is None
@@ -208,8 +210,7 @@ class Pipeline:
             recorder.log_event(kind, frame_index, target_id, **extra)
 
     def close(self) -> None:
-        """Stop the trackers' threads and finish the recording (the file is readable without
-        this, up to its last flush)."""
+        """Stop the trackers' threads and processes, finish the recording (readable anyway)."""
         self._groups.close()
         if self._recorder is not None:
             self._recorder.close()

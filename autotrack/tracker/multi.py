@@ -2,12 +2,16 @@
 
 Each target has its own AutoTrack (its own filter, scale filter and regularisation state); the
 frame is decoded and checked once and handed to every tracker, optionally on a thread pool
-(numpy, scipy.fft, OpenCV and numba release the GIL in the heavy parts). Every result carries
-the multi-tracker's frame index, so a target added or reset later is numbered like the others.
+(numpy, scipy.fft, OpenCV and numba release the GIL in the heavy parts) and optionally shared
+with child processes (`processes` > 1: the targets are spread over this process and
+`processes - 1` children, `target_process`, which gives true parallelism where threads
+serialise on the GIL). Every result carries the multi-tracker's frame index, so a target added
+or reset later is numbered like the others.
 """
 
 from __future__ import annotations
 
+import os
 from collections.abc import Callable, Iterable, Mapping, Sequence
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import replace
@@ -17,6 +21,7 @@ import numpy as np
 from autotrack.errors import InputError
 from autotrack.params import TrackerParams
 from autotrack.result import TrackResult
+from autotrack.tracker.target_process import SharedFrame, acquire_process, release_process
 from autotrack.tracker.tracker import AutoTrack
 
 Box = Sequence[float]
@@ -31,23 +36,33 @@ class MultiTracker:
         target_ids: Iterable[str] = (),
         threads: int = 1,
         colour_table: np.ndarray | None = None,
+        processes: int = 1,
     ) -> None:
         """`target_ids` fixes the targets `init` expects (empty: whatever `init` is given);
-        `threads` > 1 runs the targets concurrently."""
+        `threads` > 1 runs this process's targets concurrently; `processes` > 1 spreads the
+        targets over this process and `processes - 1` child processes."""
         if threads < 1:
             raise InputError(f"threads must be at least 1, got {threads}")
+        if processes < 1:
+            raise InputError(f"processes must be at least 1, got {processes}")
+        if processes > 1 and os.name != "posix":
+            raise InputError("tracking in several processes needs a POSIX system (Linux, macOS)")
         self.params = params
         self.colour_table = colour_table
         self.threads = threads
+        self.processes = processes
         self._expected = tuple(target_ids)
-        self._trackers: dict[str, AutoTrack] = {}
+        self._trackers: dict[str, AutoTrack] = {}  # this process's targets
+        self._owners: dict[str, int] = {}  # every target: 0 here, i > 0 the i-th child
         self._frame_index = -1
         self._pool = ThreadPoolExecutor(max_workers=threads) if threads > 1 else None
+        self._children = [acquire_process(params, colour_table) for _ in range(processes - 1)]
+        self._shared_frame = SharedFrame() if self._children else None
 
     @property
     def target_ids(self) -> tuple[str, ...]:
         """Targets currently tracked, in the order they were added."""
-        return tuple(self._trackers)
+        return tuple(self._owners)
 
     @property
     def frame_index(self) -> int:
@@ -71,9 +86,17 @@ class MultiTracker:
         if not boxes:
             raise InputError("no targets to track: give at least one box")
         frame = _shared_frame(frame)
-        self._trackers = {str(k): self._new_tracker() for k in boxes}
-        self._frame_index = 0
+        for target_id in list(self._owners):
+            self._drop(target_id)
         starts = {str(k): tuple(b) for k, b in boxes.items()}
+        for target_id in starts:
+            self._owners[target_id] = self._least_loaded_owner()
+        self._trackers = {k: self._new_tracker() for k, o in self._owners.items() if o == 0}
+        self._frame_index = 0
+        handle = self._publish(frame)
+        for target_id, box in starts.items():
+            if self._owners[target_id] > 0:
+                self._children[self._owners[target_id] - 1].start(target_id, handle, box)
         return self._run(lambda target_id, tracker: tracker.init(frame, starts[target_id]))
 
     def update(self, frame: np.ndarray) -> dict[str, TrackResult]:
@@ -82,32 +105,43 @@ class MultiTracker:
             raise InputError("call init(frame, boxes) before update(frame)")
         frame = _shared_frame(frame)
         self._frame_index += 1
+        handle = self._publish(frame)
+        for index, child in enumerate(self._children, start=1):
+            target_ids = [k for k, owner in self._owners.items() if owner == index]
+            if target_ids:
+                child.update(target_ids, handle)
         return self._run(lambda _target_id, tracker: tracker.update(frame))
 
     def add_target(self, target_id: str, frame: np.ndarray, box: Box) -> TrackResult:
         """Start a new target on `frame`, which must be the frame last processed."""
-        if target_id in self._trackers:
+        if target_id in self._owners:
             raise InputError(f"target {target_id!r} already exists; use reset_target to move it")
         return self._start(target_id, frame, box)
 
     def remove_target(self, target_id: str) -> None:
         """Stop tracking a target."""
-        if target_id not in self._trackers:
-            raise InputError(f"no target {target_id!r} (targets: {', '.join(self._trackers)})")
-        del self._trackers[target_id]
+        if target_id not in self._owners:
+            raise InputError(f"no target {target_id!r} (targets: {', '.join(self._owners)})")
+        self._drop(target_id)
 
     def reset_target(self, target_id: str, frame: np.ndarray, box: Box) -> TrackResult:
         """Restart a target from a corrected box on `frame` (the frame last processed), e.g. when
         a user fixes a drifting box; the other targets are untouched."""
-        if target_id not in self._trackers:
-            raise InputError(f"no target {target_id!r} (targets: {', '.join(self._trackers)})")
+        if target_id not in self._owners:
+            raise InputError(f"no target {target_id!r} (targets: {', '.join(self._owners)})")
         return self._start(target_id, frame, box)
 
     def close(self) -> None:
-        """Stop the worker threads (the trackers' state stays readable)."""
+        """Stop the worker threads and child processes (this process's trackers stay readable)."""
         if self._pool is not None:
             self._pool.shutdown(wait=True)
             self._pool = None
+        for child in self._children:
+            release_process(child)
+        self._children = []
+        if self._shared_frame is not None:
+            self._shared_frame.close()
+            self._shared_frame = None
 
     def __enter__(self) -> MultiTracker:
         return self
@@ -123,20 +157,72 @@ class MultiTracker:
     def _start(self, target_id: str, frame: np.ndarray, box: Box) -> TrackResult:
         if self._frame_index < 0:
             raise InputError("call init(frame, boxes) before adding or resetting a target")
-        tracker = self._new_tracker()
-        result = tracker.init(_shared_frame(frame), tuple(box))
-        self._trackers[target_id] = tracker
+        frame = _shared_frame(frame)
+        owner = self._owners.get(target_id)
+        if owner is None:
+            owner = self._least_loaded_owner()
+        if owner == 0:
+            tracker = self._new_tracker()
+            result = tracker.init(frame, tuple(box))
+            self._trackers[target_id] = tracker
+        else:
+            child = self._children[owner - 1]
+            child.start(target_id, self._publish(frame), tuple(box))
+            result = child.collect()[target_id]
+        self._owners[target_id] = owner
         return replace(result, frame_index=self._frame_index)
 
-    def _run(self, step: Callable[[str, AutoTrack], TrackResult]) -> dict[str, TrackResult]:
-        """Apply `step` to every (target id, tracker), concurrently when there is a pool."""
-        items = list(self._trackers.items())
-        if self._pool is None or len(items) < 2:
-            results = {k: step(k, tracker) for k, tracker in items}
+    def _drop(self, target_id: str) -> None:
+        owner = self._owners.pop(target_id)
+        if owner == 0:
+            del self._trackers[target_id]
         else:
-            futures = {k: self._pool.submit(step, k, tracker) for k, tracker in items}
-            results = {k: future.result() for k, future in futures.items()}
-        return {k: replace(r, frame_index=self._frame_index) for k, r in results.items()}
+            self._children[owner - 1].remove(target_id)
+            self._children[owner - 1].collect()
+
+    def _least_loaded_owner(self) -> int:
+        """This process (0) or the child (1, 2, ...) with the fewest targets, first on ties."""
+        counts = [0] * self.processes
+        for owner in self._owners.values():
+            counts[owner] += 1
+        return counts.index(min(counts))
+
+    def _publish(self, frame: np.ndarray) -> tuple | None:
+        """The frame in shared memory for the children (None without children)."""
+        return None if self._shared_frame is None else self._shared_frame.write(frame)
+
+    def _run(self, step: Callable[[str, AutoTrack], TrackResult]) -> dict[str, TrackResult]:
+        """Apply `step` to every (target id, tracker) of this process, concurrently when there
+        is a pool, then collect the children's answers to the command just sent to them."""
+        items = list(self._trackers.items())
+        try:
+            if self._pool is None or len(items) < 2:
+                results = {k: step(k, tracker) for k, tracker in items}
+            else:
+                futures = {k: self._pool.submit(step, k, tracker) for k, tracker in items}
+                results = {k: future.result() for k, future in futures.items()}
+        finally:
+            results_of_children = self._collect_children()
+        results.update(results_of_children)
+        return {
+            k: replace(results[k], frame_index=self._frame_index)
+            for k in self._owners
+            if k in results
+        }
+
+    def _collect_children(self) -> dict[str, TrackResult]:
+        """Every pending answer of every child; the first error is raised once all are in."""
+        results: dict[str, TrackResult] = {}
+        error: Exception | None = None
+        for child in self._children:
+            while child.pending:
+                try:
+                    results.update(child.collect())
+                except Exception as failure:
+                    error = error or failure
+        if error is not None:
+            raise error
+        return results
 
 
 def _shared_frame(frame: np.ndarray) -> np.ndarray:

@@ -1,0 +1,298 @@
+"""Targets tracked in a child process, so that several targets run on several cores.
+
+Threads cannot do this well: a target's update is hundreds of short steps, and the Python and
+small-array numpy work between the compiled kernels and the FFTs holds the GIL, so two threads
+serialise on it (see docs/benchmarks.md, Speed). A `TargetProcess` owns its own `AutoTrack`s in
+a child process. The parent writes each frame once into shared memory (`SharedFrame`, read by
+every child), sends a short command over a socket and later collects the `TrackResult`s (a
+box, signals and three small maps each). The child runs the same code on the same inputs, so
+its results are bit for bit those of an in-process tracker.
+
+A child is a fresh interpreter (`python -c ...`, talking over a socket pair), neither a fork
+(which would copy the parent's threads' locks: the app runs a web server) nor a
+`multiprocessing` spawn (which re-runs the caller's main script, unguarded in most scripts).
+It imports the tracker and loads the cached numba kernels once (~1 s on an idle machine, in
+the background while the parent goes on) and uses as many OpenCV threads as the parent. A
+closed MultiTracker gives its children back (`release_process`): the next one
+(`acquire_process`) starts at once, with no start-up to pay again.
+"""
+
+from __future__ import annotations
+
+import atexit
+import contextlib
+import os
+import socket
+import subprocess
+import sys
+import threading
+import traceback
+from collections.abc import Mapping, Sequence
+from multiprocessing import resource_tracker
+from multiprocessing.connection import Connection
+from multiprocessing.shared_memory import SharedMemory
+
+import numpy as np
+
+from autotrack.params import TrackerParams
+from autotrack.result import TrackResult
+
+Box = Sequence[float]
+FrameHandle = tuple[str, tuple[int, ...]]
+"""A frame in shared memory: the segment's name and the frame's shape (uint8)."""
+
+
+class WorkerError(RuntimeError):
+    """A tracking child process stopped or failed in a way that is not the caller's input."""
+
+
+class SharedFrame:
+    """One shared-memory segment holding the current frame for every child to read."""
+
+    def __init__(self) -> None:
+        self._memory: SharedMemory | None = None
+
+    def write(self, frame: np.ndarray) -> FrameHandle:
+        """Copy `frame` (uint8, contiguous) into the segment; returns its handle."""
+        if self._memory is None or self._memory.size < frame.nbytes:
+            self.close()
+            self._memory = SharedMemory(create=True, size=max(frame.nbytes, 1))
+        view = np.ndarray(frame.shape, np.uint8, buffer=self._memory.buf)
+        view[...] = frame
+        return self._memory.name, frame.shape
+
+    def close(self) -> None:
+        """Release and remove the segment."""
+        if self._memory is not None:
+            self._memory.close()
+            self._memory.unlink()
+            self._memory = None
+
+
+class TargetProcess:
+    """A child process tracking some of the targets; commands are answered in order."""
+
+    def __init__(self) -> None:
+        parent_end, child_end = socket.socketpair()
+        self._process = subprocess.Popen(
+            [sys.executable, "-c", _CHILD_MAIN, str(child_end.fileno())],
+            pass_fds=[child_end.fileno()],
+            stdin=subprocess.DEVNULL,
+            env=dict(os.environ, PYTHONPATH=os.pathsep.join(p for p in sys.path if p)),
+        )
+        child_end.close()
+        self._connection = Connection(parent_end.detach())
+        self._pending = 0
+
+    @property
+    def pid(self) -> int:
+        """The child's process id."""
+        return self._process.pid
+
+    def alive(self) -> bool:
+        """Whether the child is still running."""
+        return self._process.poll() is None
+
+    def configure(self, params: TrackerParams, colour_table: np.ndarray | None) -> None:
+        """Drop every tracker and take these settings (and this process's OpenCV threads)."""
+        import cv2
+
+        self._send(("configure", params, colour_table, cv2.getNumThreads()))
+
+    def start(self, target_id: str, frame: FrameHandle, box: Box) -> None:
+        """Ask for a new tracker (or a restarted one) for `target_id` on `frame`."""
+        self._send(("start", target_id, frame, tuple(float(v) for v in box)))
+
+    def update(self, target_ids: Sequence[str], frame: FrameHandle) -> None:
+        """Ask for these targets to be tracked into `frame`."""
+        self._send(("update", tuple(target_ids), frame))
+
+    def remove(self, target_id: str) -> None:
+        """Drop a target's tracker."""
+        self._send(("remove", target_id))
+
+    @property
+    def pending(self) -> int:
+        """Commands sent whose answers are not collected yet."""
+        return self._pending
+
+    def collect(self) -> dict[str, TrackResult]:
+        """The answer to the oldest command not yet collected (re-raises the child's error)."""
+        self._pending -= 1
+        try:
+            status, payload = self._connection.recv()
+        except (EOFError, OSError) as error:
+            raise WorkerError(
+                f"the tracking process {self._process.pid} stopped unexpectedly "
+                f"(exit code {self._process.poll()})"
+            ) from error
+        if status == "error":
+            raise payload
+        return payload
+
+    def close(self) -> None:
+        """Stop the child (answers still pending are dropped)."""
+        with contextlib.suppress(OSError):  # the child may be gone already
+            self._connection.send(("stop",))
+        try:
+            self._process.wait(timeout=5)
+        except subprocess.TimeoutExpired:
+            self._process.kill()
+            self._process.wait()
+        self._connection.close()
+
+    def _send(self, command: tuple) -> None:
+        try:
+            self._connection.send(command)
+        except (BrokenPipeError, OSError) as error:
+            raise WorkerError(f"the tracking process {self._process.pid} has stopped") from error
+        self._pending += 1
+
+
+_CHILD_MAIN = (
+    "import sys; from autotrack.tracker.target_process import serve; serve(int(sys.argv[1]))"
+)
+
+
+def serve(descriptor: int) -> None:
+    """The child's loop on the socket `descriptor`: one answer per command until "stop" or the
+    parent goes away."""
+    connection = Connection(descriptor)
+    state = _ChildState()
+    try:
+        while True:
+            try:
+                command = connection.recv()
+            except (EOFError, OSError):
+                return
+            if command[0] == "stop":
+                return
+            try:
+                connection.send(("ok", state.answer(command)))
+            except Exception as error:  # sent back to the parent, which re-raises it
+                connection.send(("error", _picklable(error)))
+    finally:
+        state.frames.close()
+        connection.close()
+
+
+class _ChildState:
+    """What a child holds: its settings, its targets' trackers, its view of the frames."""
+
+    def __init__(self) -> None:
+        self.params: TrackerParams | None = None
+        self.colour_table: np.ndarray | None = None
+        self.trackers: dict = {}
+        self.frames = _AttachedFrames()
+
+    def answer(self, command: tuple) -> Mapping[str, TrackResult]:
+        from autotrack.tracker.tracker import AutoTrack
+
+        kind = command[0]
+        if kind == "configure":
+            import cv2
+
+            _, self.params, self.colour_table, opencv_threads = command
+            cv2.setNumThreads(opencv_threads)
+            self.trackers = {}
+            return {}
+        if kind == "start":
+            _, target_id, handle, box = command
+            tracker = AutoTrack(self.params, colour_table=self.colour_table)
+            result = tracker.init(self.frames.view(handle), box)
+            self.trackers[target_id] = tracker
+            return {target_id: result}
+        if kind == "update":
+            _, target_ids, handle = command
+            frame = self.frames.view(handle)
+            return {target_id: self.trackers[target_id].update(frame) for target_id in target_ids}
+        if kind == "remove":
+            self.trackers.pop(command[1], None)
+            return {}
+        raise ValueError(f"unknown command {kind!r}")
+
+
+class _AttachedFrames:
+    """The child's read-only views of the parent's shared frame segments."""
+
+    def __init__(self) -> None:
+        self._memory: SharedMemory | None = None
+
+    def view(self, handle: FrameHandle) -> np.ndarray:
+        name, shape = handle
+        if self._memory is None or self._memory.name != name:
+            self.close()
+            self._memory = SharedMemory(name=name)
+            # The parent owns (and removes) the segment: without this the child's own resource
+            # tracker would remove it when the child exits, and warn about a leak.
+            resource_tracker.unregister(self._memory._name, "shared_memory")
+        frame = np.ndarray(shape, np.uint8, buffer=self._memory.buf)
+        frame.flags.writeable = False
+        return frame
+
+    def close(self) -> None:
+        if self._memory is not None:
+            self._memory.close()
+            self._memory = None
+
+
+def _picklable(error: Exception) -> Exception:
+    """The error itself when it survives pickling, else a WorkerError with its traceback."""
+    import pickle
+
+    try:
+        pickle.loads(pickle.dumps(error))
+        return error
+    except Exception:
+        return WorkerError("".join(traceback.format_exception(error)))
+
+
+IDLE_LIMIT = 4
+"""Idle children kept for the next MultiTracker (a child's start-up is paid once)."""
+_idle: list[TargetProcess] = []
+_idle_lock = threading.Lock()
+
+
+def acquire_process(params: TrackerParams, colour_table: np.ndarray | None) -> TargetProcess:
+    """An idle child if there is one (already started, kernels loaded), else a new one, set to
+    track with `params`."""
+    with _idle_lock:
+        while _idle:
+            child = _idle.pop()
+            if child.alive():
+                break
+            child.close()
+        else:
+            child = TargetProcess()
+    child.configure(params, colour_table)
+    return child
+
+
+def release_process(child: TargetProcess) -> None:
+    """Give a child back: its trackers are dropped and it waits for the next MultiTracker (or
+    it is stopped, when it failed or enough children wait already)."""
+    try:
+        while child.pending:
+            child.collect()
+        child.configure(TrackerParams(), None)  # drops the trackers
+        child.collect()
+    except Exception:
+        child.close()
+        return
+    with _idle_lock:
+        if len(_idle) < IDLE_LIMIT:
+            _idle.append(child)
+            return
+    child.close()
+
+
+def stop_idle_processes() -> None:
+    """Stop every idle child (at exit; the children also stop when this process goes away)."""
+    with _idle_lock:
+        children = list(_idle)
+        _idle.clear()
+    for child in children:
+        child.close()
+
+
+atexit.register(stop_idle_processes)
