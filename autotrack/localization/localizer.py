@@ -20,6 +20,7 @@ world axes, `position` is the camera centre in world metres.
 from __future__ import annotations
 
 import math
+import statistics
 from collections import deque
 from collections.abc import Mapping
 from dataclasses import dataclass, field
@@ -195,7 +196,9 @@ class Localizer:
         history = self._peaks.get(landmark_id)
         if history is None or len(history) < 5:
             return math.nan
-        return float(np.median(history))
+        # statistics.median: np.median's value (the middle score, or the mean of the middle two
+        # as (a + b) / 2) without building an array, per landmark and frame.
+        return float(statistics.median(history))
 
     # -- solving ---------------------------------------------------------------------------
 

@@ -183,12 +183,15 @@ class AdmmSettings:
 
 
 @njit(cache=True, nogil=True, fastmath=False)
-def _g_step_kernel(xf, yf, h_f, l_f, g_prev, s_xx, s_gx_prev, gamma, theta, num_cells, g_out):
+def _g_step_kernel(
+    xf, yf, h_f, l_f, g_prev, s_xx, s_gx_prev, gamma, theta, num_cells, zero_start, g_out
+):
     # Loops run channel-outermost so every array is read contiguously. Complex products are
     # spelt out on real and imaginary parts in numba's own order (re = ac - bd, im = ad + bc);
     # a real factor multiplies both parts directly and the division is by a real number, which
     # gives the same values as the complex arithmetic with a zero imaginary part at half the
-    # work.
+    # work. `zero_start`: h and l are all zero (the first iteration), so their channel sums are
+    # +0 for finite x, the value the skipped loop would produce.
     channels, rows, cols = xf.shape
     scale = np.float32(1.0 / (gamma + theta))
     t_scale = np.float32(scale / num_cells)
@@ -199,7 +202,7 @@ def _g_step_kernel(xf, yf, h_f, l_f, g_prev, s_xx, s_gx_prev, gamma, theta, num_
     s_hx_im = np.zeros((rows, cols), np.float32)
     s_lx_re = np.zeros((rows, cols), np.float32)
     s_lx_im = np.zeros((rows, cols), np.float32)
-    for k in range(channels):
+    for k in range(0 if zero_start else channels):
         for r in range(rows):
             for c in range(cols):
                 x, h, m = xf[k, r, c], h_f[k, r, c], l_f[k, r, c]
@@ -263,17 +266,30 @@ def solve_g_step(
     gamma: float,
     theta: float,
     num_cells: int,
+    zero_start: bool = False,
 ) -> np.ndarray:
     """Sherman-Morrison closed form of the g-subproblem, per frequency (eqs. 10-11).
 
     Per frequency j it solves (x x^H / T + (gamma + theta) I) g = y x / T - l + gamma h +
     theta g_prev, written as the release writes it (l is its scaled multiplier, T = num_cells).
     `s_xx` = sum_k |x_k|^2 and `s_gx_prev` = sum_k conj(x_k) g_prev_k are constant within a
-    frame and passed in precomputed.
+    frame and passed in precomputed. `zero_start` says h and l are all zero (ADMM's first
+    iteration): their sums over channels are then not computed.
     """
     g_f = np.empty_like(xf)
     _g_step_kernel(
-        xf, yf, h_f, l_f, g_prev, s_xx, s_gx_prev, float(gamma), float(theta), num_cells, g_f
+        xf,
+        yf,
+        h_f,
+        l_f,
+        g_prev,
+        s_xx,
+        s_gx_prev,
+        float(gamma),
+        float(theta),
+        num_cells,
+        bool(zero_start),
+        g_f,
     )
     return g_f
 
@@ -319,7 +335,9 @@ def train_filter(
     gamma = float(settings.gamma_init)
     theta = float(theta_start)
     for iteration in range(1, settings.iterations + 1):
-        g_f = solve_g_step(xf, yf, h_f, l_f, g_prev, s_xx, s_gx_prev, gamma, theta, num_cells)
+        g_f = solve_g_step(
+            xf, yf, h_f, l_f, g_prev, s_xx, s_gx_prev, gamma, theta, num_cells, iteration == 1
+        )
         if iteration == settings.iterations:
             break  # the last h, theta and multiplier updates would not be used
         h_f = solve_h_step(g_f, l_f, spatial_window, gamma, settings.lambda_spatial, transform)
@@ -365,12 +383,14 @@ def newton_peak(response: np.ndarray, iterations: int) -> tuple[float, float, fl
     for _ in range(iterations):
         y_resp = exp_iky @ response_f
         resp_x = response_f @ exp_ikx
-        grad_y = -np.imag((ky * exp_iky) @ resp_x)
-        grad_x = -np.imag(y_resp @ (kx * exp_ikx))
+        ky_exp = ky * exp_iky  # each product once (the release writes it twice: same values)
+        kx_exp = kx * exp_ikx
+        grad_y = -(ky_exp @ resp_x).imag
+        grad_x = -(y_resp @ kx_exp).imag
         ival = 1j * (exp_iky @ resp_x)
-        h_yy = np.real(-(ky_sq * exp_iky) @ resp_x + ival)
-        h_xx = np.real(-y_resp @ (kx_sq * exp_ikx) + ival)
-        h_xy = np.real(-((ky * exp_iky) @ (response_f @ (kx * exp_ikx))))
+        h_yy = (-(ky_sq * exp_iky) @ resp_x + ival).real
+        h_xx = (-y_resp @ (kx_sq * exp_ikx) + ival).real
+        h_xy = (-(ky_exp @ (response_f @ kx_exp))).real
         det = h_yy * h_xx - h_xy * h_xy
         if det == 0.0 or not np.isfinite(det):
             break

@@ -62,6 +62,7 @@ class ScaleFilter:
         self._numerator: np.ndarray | None = None
         self._denominator: np.ndarray | None = None
         self._samples: np.ndarray | None = None
+        self._samples_f: np.ndarray | None = None  # the transform of `_samples`
 
     def _extract(
         self, image: np.ndarray, position, scale: float, indices: np.ndarray
@@ -80,6 +81,7 @@ class ScaleFilter:
         all_indices = np.arange(self.params.num_scales)
         self._samples = self._extract(image, position, scale, all_indices)
         samples_f = scipy.fft.fft(self._samples, axis=0, workers=1)
+        self._samples_f = samples_f
         response = np.real(
             scipy.fft.ifft(
                 np.sum(self._numerator * samples_f, axis=1)
@@ -114,7 +116,10 @@ class ScaleFilter:
             samples = self._extract(image, position, scale, np.arange(self.params.num_scales))
         else:
             samples = self._shifted_samples(image, position, scale, best)
-        samples_f = scipy.fft.fft(samples, axis=0, workers=1)
+        if samples is self._samples and self._samples_f is not None:
+            samples_f = self._samples_f  # scale unchanged: the detection samples, transformed
+        else:
+            samples_f = scipy.fft.fft(samples, axis=0, workers=1)
         numerator = self.label_f[:, None] * np.conj(samples_f)
         denominator = np.sum(np.real(samples_f * np.conj(samples_f)), axis=1)
         rate = self.params.scale_learning_rate
