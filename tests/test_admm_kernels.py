@@ -125,3 +125,20 @@ def test_g_step_kernel_equals_complex_arithmetic_bit_for_bit(monkeypatch, datase
             args = (xf, yf, h_f, l_f, g_prev, s_xx, s_gx, gamma, theta, cells)
             _g_step_in_complex_arithmetic(*args, expected)
             np.testing.assert_array_equal(dcf.solve_g_step(*args), expected)
+
+
+@needs_colour_table
+@pytest.mark.parametrize(("dataset", "name"), SEQUENCES[:2])
+def test_g_step_zero_start_equals_the_full_sums_bit_for_bit(monkeypatch, dataset, name):
+    """ADMM's first g-step skips the channel sums of h and l, which are all zero there."""
+    for xf, g_prev, _, transform in _training_inputs(monkeypatch, dataset, name):
+        yf = xf[0] * np.complex64(0.5 - 0.25j)
+        zeros = np.zeros_like(xf)
+        s_xx = np.sum(xf.real**2 + xf.imag**2, axis=0)
+        s_gx = np.sum(np.conj(xf) * g_prev, axis=0)
+        cells = transform.grid_size[0] * transform.grid_size[1]
+        for gamma, theta in ((1.0, 0.0), (1.0, 12.5), (0.7312, 3.0)):
+            args = (xf, yf, zeros, zeros, g_prev, s_xx, s_gx, gamma, theta, cells)
+            full = dcf.solve_g_step(*args, zero_start=False)
+            skipped = dcf.solve_g_step(*args, zero_start=True)
+            np.testing.assert_array_equal(skipped.view(np.uint64), full.view(np.uint64))

@@ -420,3 +420,19 @@ def test_cli_localize_reports_bad_input_in_one_line(short_sequence, tmp_path, ca
     assert "unknown landmark 'Z'" in capsys.readouterr().err
     assert main(["localize", str(tmp_path), "--quiet"]) == 2
     assert "give --scene" in capsys.readouterr().err
+
+
+def test_typical_peak_is_numpys_median_of_the_history():
+    """The localizer's typical peak (statistics.median of the trusted peaks) equals np.median
+    bit for bit, for odd and even history lengths; fewer than five peaks give NaN."""
+    from collections import deque
+
+    localizer = Localizer(SCENE)
+    rng = np.random.default_rng(5)
+    assert math.isnan(localizer._typical_peak("a"))
+    for length in range(5, 31):
+        history = deque(rng.random(length) * rng.choice([1e-3, 1.0, 7.0]), maxlen=30)
+        localizer._peaks["a"] = history
+        assert localizer._typical_peak("a") == float(np.median(history))
+    localizer._peaks["a"] = deque([0.5, 0.2, 0.9, 0.4])
+    assert math.isnan(localizer._typical_peak("a"))

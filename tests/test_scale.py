@@ -214,3 +214,23 @@ def test_shifted_samples_are_the_release_reuse_of_the_detection_samples(best):
     np.testing.assert_allclose(
         scale._numerator, (1 - rate) * previous + rate * learnt, rtol=1e-4, atol=1e-4
     )
+
+
+def test_update_at_the_detected_scale_learns_this_frames_transform_exactly():
+    """Without a scale change, update reuses the transform detect just computed: the model is
+    bit for bit the one learnt from a fresh transform of this frame's samples."""
+    import scipy.fft
+
+    scale = make_filter()
+    scale.update(target_image(SIDE), POSITION, 1.0, best=None)
+    rate = PARAMS.scale_learning_rate
+    for seed, side in ((1, SIDE), (2, SIDE * 1.01), (3, SIDE * 0.99)):
+        image = target_image(side, seed=seed)
+        scale.detect(image, POSITION, 1.0)
+        numerator, denominator = scale._numerator.copy(), scale._denominator.copy()
+        samples_f = scipy.fft.fft(scale._samples.copy(), axis=0, workers=1)
+        scale.update(image, POSITION, 1.0, best=PARAMS.num_scales // 2)
+        learnt = scale.label_f[:, None] * np.conj(samples_f)
+        energy = np.sum(np.real(samples_f * np.conj(samples_f)), axis=1)
+        np.testing.assert_array_equal(scale._numerator, (1 - rate) * numerator + rate * learnt)
+        np.testing.assert_array_equal(scale._denominator, (1 - rate) * denominator + rate * energy)
