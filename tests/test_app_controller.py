@@ -421,6 +421,24 @@ def test_reopening_continues_with_the_recorded_tracker_parameters(tmp_path: Path
         second.close()
 
 
+def test_a_session_is_listed_from_its_first_box_without_a_refresh(tmp_path: Path) -> None:
+    controller = _controller(tmp_path / "sessions")
+    try:
+        controller.open_initial()
+        assert controller.session_choices == {}  # nothing recorded before the app started
+        controller.place_box(tuple(_demo_boxes()["A"]))
+        recording = controller.run.session_path
+        assert recording is not None and recording.name in controller.session_choices
+        controller.step(1)
+        controller.open_initial()  # opening again finishes that recording: still listed
+        assert controller.session_choices[recording.name] == recording
+        controller.reopen(recording.name)
+        assert recording.name in controller.session_choices
+        assert controller.run.session_path.name in controller.session_choices  # its successor
+    finally:
+        controller.close()
+
+
 def test_uploads_and_typed_paths_stay_inside_the_allowed_folders(controller, tmp_path) -> None:
     opened = controller.sequence_path
     with pytest.raises(InputError, match="no such file or folder among those"):
