@@ -364,6 +364,11 @@ class TabController(SessionCommands):
         run = self.require_run()
         if self.boxes_path is None or run.scene is None:
             raise InputError("this sequence has no boxes.json")
+        if run.targets:  # it adds a target per landmark: more would pass the cap, or stack
+            raise InputError(
+                f"boxes.json adds a target for every landmark: delete the {len(run.targets)} "
+                "drawn first, or draw the rest by hand"
+            )
         boxes = boxes_by_landmark(read_boxes_json(self.boxes_path), run.scene)
         self.stop_playing()
         self.cursor = 0

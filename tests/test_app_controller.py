@@ -106,6 +106,13 @@ def test_boxes_json_places_one_target_per_landmark(controller) -> None:
     assert run.poses[0].valid and controller.cursor == 0
 
 
+def test_boxes_json_is_refused_once_targets_exist(controller) -> None:
+    controller.place_box(tuple(_demo_boxes()["A"]))
+    with pytest.raises(InputError, match="delete the 1 drawn first"):
+        controller.load_boxes_json()  # else T5, past the cap, on A's box again
+    assert list(controller.run.targets) == ["T1"]
+
+
 def test_a_boxes_json_list_is_assigned_to_landmarks_like_the_cli_does(tmp_path: Path) -> None:
     sequence = tmp_path / "flight"
     sequence.mkdir()
