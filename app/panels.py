@@ -15,7 +15,7 @@ from typing import Any
 import numpy as np
 import viser
 
-from app.boxes import format_box
+from app.boxes import Box, format_box
 from app.config import AppConfig
 from app.controller import TabController
 from app.live import DISABLED_HINT, FROZEN, OFF, PREVIEW, TRACKING, LiveControl
@@ -421,9 +421,16 @@ def show_targets(panels: Panels, controller: TabController) -> None:
     quiet.set(widgets.table, "content", targets_table(controller))
 
 
+def compact_box(box: Box) -> str:
+    """A box as the Targets table shows it: each value to 0.1 px without trailing zeros."""
+    return ", ".join(f"{round(value, 1):g}" for value in box)
+
+
 def targets_table(controller: TabController) -> str:
-    """The scene's landmarks (tied, or still to draw), the targets with their landmark, its
-    reprojection residual, box and progress, and the last landmark search's warning."""
+    """The scene's landmarks (tied, or still to draw), the targets (`T1 → A`: tied to landmark
+    A; `*`: by hand) with the search's reprojection residual, the box on the current frame and
+    the last frame tracked, and the last landmark search's warning. Narrow enough that its
+    header reads on one line at the default panel width (tests/test_app_browser_panels.py)."""
     run = controller.run
     targets = controller.targets()
     parts: list[str] = []
@@ -440,21 +447,21 @@ def targets_table(controller: TabController) -> str:
         return "\n\n".join(parts)
     last = controller.ties.last
     residuals = {} if last is None else last.residuals
-    rows = [
-        "| target | landmark | residual | box at this frame | tracked to |",
-        "|---|---|---|---|---|",
-    ]
+    rows = ["| target | residual | box x, y, w, h | tracked to |", "|---|---|---|---|"]
     for target in targets:
         result = target.results.get(controller.cursor)
-        box = "—" if result is None else format_box(result.box)
+        box = "—" if result is None else compact_box(result.box)
         residual = residuals.get(target.id)
-        by_hand = " (by hand)" if target.id in controller.ties.manual else ""
+        landmark = "" if target.landmark_id is None else f" → {target.landmark_id}"
+        by_hand = "*" if target.id in controller.ties.manual else ""
         rows.append(
-            f"| {target.id} | {(target.landmark_id or '—') + by_hand} | "
+            f"| {target.id}{landmark}{by_hand} | "
             f"{'—' if residual is None else f'{residual:.1f} px'} | {box} | "
             f"{target.last_frame + 1} |"
         )
     parts.append("\n".join(rows))
+    if controller.ties.manual & set(run.targets if run is not None else ()):
+        parts.append("\\* tied to its landmark by hand")
     if last is not None and last.warning:
         parts.append(last.warning)
     return "\n\n".join(parts)

@@ -494,7 +494,7 @@ def test_four_drags_make_four_targets_tied_to_the_landmarks(studio) -> None:
     session = run.session_path
     assert session is not None and studio.recordings.writer_of(session) == tab.tab_id
     assert session.name in tab.panels.session.recording.content
-    assert "| T4 |" in tab.panels.targets.table.content
+    assert "| T4 " in tab.panels.targets.table.content
 
 
 def test_boxes_json_button_places_the_demo_boxes(studio) -> None:
@@ -513,7 +513,7 @@ def test_boxes_json_button_places_the_demo_boxes(studio) -> None:
 def _tracked_to(tab, target_id: str) -> int:
     """The 'tracked to' column of a target's row in the Targets table."""
     for row in tab.panels.targets.table.content.splitlines():
-        if row.startswith(f"| {target_id} |"):
+        if row.startswith(f"| {target_id} "):
             return int(row.strip("| ").split("|")[-1])
     return 0
 

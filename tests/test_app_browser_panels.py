@@ -48,7 +48,7 @@ def test_the_targets_table_header_reads_on_one_line(studio, tmp_path) -> None:  
             tab = _open(studio, page)
             page.get_by_role("button", name="Load boxes.json").click()
             _wait_for(lambda: len(tab.controller.run.targets) == 4, what="the boxes", tab=tab)
-            _wait_for(lambda: len(page.evaluate(TABLE_HEADER_JS)) >= 5, what="the table")
+            _wait_for(lambda: len(page.evaluate(TABLE_HEADER_JS)) > 0, what="the table")
             page.locator("table").first.scroll_into_view_if_needed()
             page.screenshot(path=str(tmp_path / "targets-table.png"))
             header = page.evaluate(TABLE_HEADER_JS)

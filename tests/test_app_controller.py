@@ -265,6 +265,8 @@ def test_a_tie_can_be_overridden_by_hand_and_the_search_keeps_it(controller) -> 
     controller.assign_landmark(second)  # T2 holds it: the two swap
     assert run.targets["T1"].landmark_id == second and run.targets["T2"].landmark_id == first
     assert controller.ties.manual == {"T1", "T2"} and "by hand" in controller.message
+    table = targets_table(controller)
+    assert f"| T1 → {second}* |" in table and "tied to its landmark by hand" in table
     controller.assign_landmark(None)
     assert run.targets["T1"].landmark_id is None
     assert second not in run.poses[0].used_landmarks
