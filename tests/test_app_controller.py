@@ -554,13 +554,18 @@ class _FakeClient:
 
     def __init__(self) -> None:
         self.notifications: list[tuple[tuple, dict]] = []
+        self.handles: list[SimpleNamespace] = []
         self.downloads: list[tuple[tuple, dict]] = []
         self.camera = SimpleNamespace(image_width=1200, image_height=800, callbacks=[])
         self.camera.on_update = self.camera.callbacks.append
         self.atomic_entered = 0
 
-    def add_notification(self, *args, **kwargs) -> None:
+    def add_notification(self, *args, **kwargs) -> SimpleNamespace:
         self.notifications.append((args, kwargs))
+        handle = SimpleNamespace(removed=False)
+        handle.remove = lambda: setattr(handle, "removed", True)
+        self.handles.append(handle)
+        return handle
 
     def send_file_download(self, *args, **kwargs) -> None:
         self.downloads.append((args, kwargs))
@@ -588,8 +593,11 @@ def test_client_channel_passes_messages_downloads_and_the_camera_to_the_client()
     channel.notify("AutoTrack Studio", "broken", error=True)
     assert client.notifications == [
         (("AutoTrack Studio", "saved"), {"auto_close_seconds": 4.0, "color": None}),
-        (("AutoTrack Studio", "broken"), {"auto_close_seconds": None, "color": "red"}),
+        (("AutoTrack Studio", "broken"), {"auto_close_seconds": 15.0, "color": "red"}),
     ]
+    channel.notify("AutoTrack Studio", "saved again")
+    channel.notify("AutoTrack Studio", "broken again", error=True)  # replaces the last error
+    assert [handle.removed for handle in client.handles] == [False, True, False, False]
     channel.download("tracks.zip", b"zip")
     assert client.downloads == [(("tracks.zip", b"zip"), {"save_immediately": True})]
     assert channel.canvas_size() == (1200, 800)
