@@ -234,6 +234,8 @@ class Tab:
         if box is None:
             raise InputError("the dragged box misses the frame or is too thin; drag again")
         self.controller.place_box(box)
+        if not letterbox.rect_inside(screen_min, screen_max):
+            self.controller.message += " The drag passed the frame's edge: the box is cut there."
 
     def seek(self, frame_index: int) -> None:
         """Go to a frame chosen on the slider; tracking up to it stops at the next command."""

@@ -853,6 +853,19 @@ def test_uploaded_zip_opens_as_a_sequence(studio) -> None:
     assert not tab.panels.targets.boxes_json.visible
 
 
+def test_a_drag_off_the_frame_is_refused_and_one_past_its_edge_is_cut(studio) -> None:
+    tab, _ = _open_tab(studio)
+    width, height = tab.controller.frame_size
+    _drag(tab, (100.0, -80.0, 60.0, 50.0))  # in the letterbox band above the frame
+    assert not tab.controller.run.targets and "misses the frame" in tab.controller.message
+    _drag(tab, (width - 30.0, height - 20.0, 60.0, 50.0))
+    (target,) = tab.controller.targets()
+    np.testing.assert_allclose(target.results[0].box, (width - 30, height - 20, 30, 20), atol=1.0)
+    assert "the box is cut there" in tab.controller.message
+    _drag(tab, (100.0, 100.0, 50.0, 40.0))  # inside: nothing said about edges
+    assert len(tab.controller.targets()) == 2 and "edge" not in tab.controller.message
+
+
 def test_drawing_needs_the_frame_canvas(studio) -> None:
     tab, channel = _open_tab(studio)
     _set(tab.panels.display.canvas, "3-D view")
