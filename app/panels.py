@@ -31,7 +31,8 @@ MAPS_OFF = "off"
 MAPS_RESPONSE = "response map on frame"
 MAPS_VARIATION = "local variation on frame"
 MAPS_VARIATION_TARGET = "local variation, target region (ASR)"
-MAPS_PANELS = "panels (per target)"
+MAPS_PANELS = "per-target panels (Debugging → Maps)"
+"""Named with where the panels show: the Signals tab stays in front when it is chosen."""
 MAP_KINDS = {
     MAPS_RESPONSE: "response",
     MAPS_VARIATION: "local_variation",
@@ -249,7 +250,7 @@ def _display_panel(
         )
     with maps_tab:
         gui.add_markdown(
-            "Choose *Display → Maps → panels (per target)* to show each target's maps here."
+            f"Choose *Display → Maps → {MAPS_PANELS}* to show each target's maps here."
         )
         folder = gui.add_folder("Maps per target", visible=False)
     return DisplayPanel(canvas, maps, trajectory, canvas_fps, folder)

@@ -605,11 +605,13 @@ def _tiles(run, target_id: str, frame_index: int) -> list[np.ndarray | None]:
 
 
 def test_map_panels_show_each_targets_own_maps_and_asr_weights(studio) -> None:
+    from app.panels import MAPS_PANELS
+
     tab, _ = _open_tab(studio)
     _draw_demo_boxes(tab)
     _set(tab.panels.playback.frame, 4)  # local variation exists from the third frame on
     assert tab.wait_idle()
-    _set(tab.panels.display.maps, "panels (per target)")
+    _set(tab.panels.display.maps, MAPS_PANELS)
     assert tab.wait_idle()
 
     run = tab.controller.run
