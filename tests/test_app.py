@@ -743,7 +743,8 @@ def test_typed_box_landmark_and_delete_through_the_widgets(studio) -> None:
     assert tab.wait_idle()
     assert "T4" not in run.targets and targets.draw.value == "new target"
     assert targets.delete.disabled
-    _set(targets.box, "10, 20, 30, 40")  # choosing T4 showed its box there
+    assert targets.box.value == ""  # choosing T4 showed its box there: gone with it
+    _set(targets.box, "10, 20, 30, 40")
     _click(targets.apply_box)  # now a new target, and T4 once more
     assert tab.wait_idle()
     assert run.targets["T4"].results[0].box == (10.0, 20.0, 30.0, 40.0)
