@@ -63,6 +63,15 @@ class Letterbox:
         """Frame pixel coordinates to canvas fractions."""
         return ((x + self.offset_x) / self.padded_width, (y + self.offset_y) / self.padded_height)
 
+    def rect_inside(self, screen_min: tuple[float, float], screen_max: tuple[float, float]) -> bool:
+        """Whether a rect-select (canvas fractions) lies within the frame (to a pixel)."""
+        x0, y0 = self.screen_to_frame(*screen_min)
+        x1, y1 = self.screen_to_frame(*screen_max)
+        width, height = self.frame_width + 1.0, self.frame_height + 1.0
+        return all(-1.0 <= x <= width for x in (x0, x1)) and all(
+            -1.0 <= y <= height for y in (y0, y1)
+        )
+
     def rect_to_box(
         self, screen_min: tuple[float, float], screen_max: tuple[float, float]
     ) -> Box | None:

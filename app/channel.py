@@ -3,11 +3,17 @@ the canvas size and the viewing camera. One implementation wraps a viser client.
 
 from __future__ import annotations
 
+import threading
 from collections.abc import Callable
 from typing import Protocol
 
 import numpy as np
 import viser
+
+NOTE_SECONDS = 4.0
+"""How long a note (a download sent, a session saved) stays on screen."""
+ERROR_SECONDS = 15.0
+"""How long an error stays on screen (the status line keeps it afterwards)."""
 
 
 class ClientChannel(Protocol):
@@ -34,14 +40,24 @@ class ViserClientChannel:
 
     def __init__(self, client: viser.ClientHandle) -> None:
         self.client = client
+        self._last_error: viser.NotificationHandle | None = None
+        self._errors = threading.Lock()  # the worker and viser's threads both report errors
 
     def notify(self, title: str, body: str, *, error: bool = False) -> None:
-        self.client.add_notification(
+        """A note closes after NOTE_SECONDS; an error replaces the previous error and closes
+        after ERROR_SECONDS (the status line keeps it), so errors never pile up over the canvas
+        where boxes are drawn."""
+        handle = self.client.add_notification(
             title,
             body,
-            auto_close_seconds=None if error else 4.0,
+            auto_close_seconds=ERROR_SECONDS if error else NOTE_SECONDS,
             color="red" if error else None,
         )
+        if error:
+            with self._errors:
+                previous, self._last_error = self._last_error, handle
+            if previous is not None:
+                previous.remove()
 
     def download(self, file_name: str, content: bytes) -> None:
         self.client.send_file_download(file_name, content, save_immediately=True)

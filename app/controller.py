@@ -23,6 +23,7 @@ from app.landmarks import LandmarkTies, search_message
 from app.owners import BrowserSpace
 from app.paths import display_name, find_sequences, resolve_user_path, store_upload
 from app.recordings import RecordingRegistry
+from app.reopening import SessionCommands
 from app.views import FrameView, frame_view
 from autotrack.errors import InputError
 from autotrack.io.boxes_json import read_boxes_json
@@ -33,15 +34,14 @@ from autotrack.localization.refine import RefineParams
 from autotrack.localization.scene import Scene, load_scene
 from autotrack.params import PRESETS, preset
 from autotrack.pipeline import Pipeline, Recording, TrackedTarget
-from autotrack.sessions import Session, open_session
-from autotrack.sessions.frames import EmbeddedFrames
+from autotrack.sessions import Session
 
 POSE_OPTIONS = {"refine_params": RefineParams(), "reacquire_params": ReacquireParams()}
 """With a scene, the pipeline gives the solver sub-pixel landmark points and re-acquires lost
 landmarks, as `autotrack localize` does."""
 
 
-class TabController:
+class TabController(SessionCommands):
     """One tab's state and commands (see the module docstring).
 
     Args:
@@ -252,9 +252,11 @@ class TabController:
             return
         self.run.close()
         self.run.frames.close()
-        if self.recording_path is not None:
-            self.recordings.release(self.recording_path)
+        finished = self.recording_path
         self.run, self.recording_path, self.boxes_path, self.truth = None, None, None, None
+        if finished is not None:
+            self.recordings.release(finished)
+            self.refresh_sessions()  # the finished session is listed at once
 
     def claim_recording(self) -> None:
         """Register the run's session file (created at the first edit) as this tab's."""
@@ -262,6 +264,7 @@ class TabController:
         if path is not None and path != self.recording_path:
             self.recordings.claim(path, self.tab_id)
             self.recording_path = path
+            self.refresh_sessions()  # the new session file is listed from its first box
 
     # -- targets ------------------------------------------------------------------------------
 
@@ -361,6 +364,11 @@ class TabController:
         run = self.require_run()
         if self.boxes_path is None or run.scene is None:
             raise InputError("this sequence has no boxes.json")
+        if run.targets:  # it adds a target per landmark: more would pass the cap, or stack
+            raise InputError(
+                f"boxes.json adds a target for every landmark: delete the {len(run.targets)} "
+                "drawn first, or draw the rest by hand"
+            )
         boxes = boxes_by_landmark(read_boxes_json(self.boxes_path), run.scene)
         self.stop_playing()
         self.cursor = 0
@@ -428,52 +436,6 @@ class TabController:
                 self.visit(self.cursor + 1)
         else:
             self.visit(target)
-
-    # -- sessions -----------------------------------------------------------------------------
-
-    def refresh_sessions(self) -> None:
-        """List the recorded sessions this tab's browser may see (app/owners.py), newest first."""
-        self.session_choices = {path.name: path for path in self.space.session_files()}
-
-    def reopen(self, name: str) -> None:
-        """Reopen the session listed as `name` and continue it into a new session file, with
-        the tracker parameters it was recorded with."""
-        path = self.session_choices.get(name)
-        if path is None:
-            raise InputError("choose a session from the list first (Refresh sessions)")
-        writer = self.recordings.writer_of(path)
-        if writer not in (None, self.tab_id):
-            raise InputError(f"{path.name} is being recorded by another tab; reopen it later")
-        if writer == self.tab_id:  # this tab's own recording: finished first, then reopened
-            self.close_run()
-        session = open_session(path)
-        if session.image_count:  # a live run's recording: its own frames, to look through
-            return self.review_session(path)
-        source = self.resolve_path(session.source)
-        scene_path = self.resolve_path(session.scene_path) if session.scene_path else None
-        frames, scene, scene_path = self._load(source, scene_path, scene_given=True)
-        run = self._new_run(frames, scene, self._recording(source, scene_path), session)
-        self.install_run(run, source, scene_path)
-        self.cursor = run.resume_frame
-        self.claim_recording()
-        note = " (the file was cut short)" if session.truncated else ""
-        self.message = (
-            f"Reopened {path.name}{note}: {len(run.targets)} targets, continuing from frame "
-            f"{self.cursor + 1}; recording to a new session file."
-        )
-
-    def review_session(self, path: Path) -> None:
-        """Open a session that embeds its frames (a live run's recording) to look through, on
-        those frames and with no new recording: its source cannot be replayed past them."""
-        session = open_session(path)
-        scene_path = session.scene_path and self.resolve_path(session.scene_path)
-        scene = load_scene(scene_path) if scene_path else None
-        frames = EmbeddedFrames(session)
-        run = self._new_run(frames, scene, None, session)
-        self.install_run(run, path, scene_path or None)
-        self.cursor = run.resume_frame
-        recorded, name = len(frames.recorded_indices), path.name
-        self.message = f"Reopened {name}: {recorded} frames recorded live (dropped ones repeat)."
 
     def export(self, what: str) -> tuple[str, bytes]:
         """(file name, content) of a download: 'tracks', 'poses' or 'mcap' (app.exports)."""

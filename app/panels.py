@@ -15,7 +15,7 @@ from typing import Any
 import numpy as np
 import viser
 
-from app.boxes import format_box
+from app.boxes import Box, format_box
 from app.config import AppConfig
 from app.controller import TabController
 from app.live import DISABLED_HINT, FROZEN, OFF, PREVIEW, TRACKING, LiveControl
@@ -31,7 +31,8 @@ MAPS_OFF = "off"
 MAPS_RESPONSE = "response map on frame"
 MAPS_VARIATION = "local variation on frame"
 MAPS_VARIATION_TARGET = "local variation, target region (ASR)"
-MAPS_PANELS = "panels (per target)"
+MAPS_PANELS = "per-target panels (Debugging → Maps)"
+"""Named with where the panels show: the Signals tab stays in front when it is chosen."""
 MAP_KINDS = {
     MAPS_RESPONSE: "response",
     MAPS_VARIATION: "local_variation",
@@ -249,7 +250,7 @@ def _display_panel(
         )
     with maps_tab:
         gui.add_markdown(
-            "Choose *Display → Maps → panels (per target)* to show each target's maps here."
+            f"Choose *Display → Maps → {MAPS_PANELS}* to show each target's maps here."
         )
         folder = gui.add_folder("Maps per target", visible=False)
     return DisplayPanel(canvas, maps, trajectory, canvas_fps, folder)
@@ -421,9 +422,16 @@ def show_targets(panels: Panels, controller: TabController) -> None:
     quiet.set(widgets.table, "content", targets_table(controller))
 
 
+def compact_box(box: Box) -> str:
+    """A box as the Targets table shows it: each value to 0.1 px without trailing zeros."""
+    return ", ".join(f"{round(value, 1):g}" for value in box)
+
+
 def targets_table(controller: TabController) -> str:
-    """The scene's landmarks (tied, or still to draw), the targets with their landmark, its
-    reprojection residual, box and progress, and the last landmark search's warning."""
+    """The scene's landmarks (tied, or still to draw), the targets (`T1 → A`: tied to landmark
+    A; `*`: by hand) with the search's reprojection residual, the box on the current frame and
+    the last frame tracked, and the last landmark search's warning. Narrow enough that its
+    header reads on one line at the default panel width (tests/test_app_browser_panels.py)."""
     run = controller.run
     targets = controller.targets()
     parts: list[str] = []
@@ -440,21 +448,21 @@ def targets_table(controller: TabController) -> str:
         return "\n\n".join(parts)
     last = controller.ties.last
     residuals = {} if last is None else last.residuals
-    rows = [
-        "| target | landmark | residual | box at this frame | tracked to |",
-        "|---|---|---|---|---|",
-    ]
+    rows = ["| target | residual | box x, y, w, h | tracked to |", "|---|---|---|---|"]
     for target in targets:
         result = target.results.get(controller.cursor)
-        box = "—" if result is None else format_box(result.box)
+        box = "—" if result is None else compact_box(result.box)
         residual = residuals.get(target.id)
-        by_hand = " (by hand)" if target.id in controller.ties.manual else ""
+        landmark = "" if target.landmark_id is None else f" → {target.landmark_id}"
+        by_hand = "*" if target.id in controller.ties.manual else ""
         rows.append(
-            f"| {target.id} | {(target.landmark_id or '—') + by_hand} | "
+            f"| {target.id}{landmark}{by_hand} | "
             f"{'—' if residual is None else f'{residual:.1f} px'} | {box} | "
             f"{target.last_frame + 1} |"
         )
     parts.append("\n".join(rows))
+    if controller.ties.manual & set(run.targets if run is not None else ()):
+        parts.append("\\* tied to its landmark by hand")
     if last is not None and last.warning:
         parts.append(last.warning)
     return "\n\n".join(parts)

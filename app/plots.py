@@ -142,21 +142,43 @@ def _css(colour: tuple[int, int, int]) -> str:
 
 
 def line_series(
-    label: str, colour: str, dash: tuple[float, ...] | None = None
+    label: str, colour: str, dash: tuple[float, ...] | None = None, slot: str | None = None
 ) -> viser.uplot.Series:
+    """A line; `slot`: the target id it plots (its legend entry is hidden while that target
+    does not exist, see `legend_style`)."""
     series = viser.uplot.Series(label=label, stroke=colour, width=1.5)
     if dash is not None:
         series["dash"] = dash
+    if slot is not None:
+        series["class"] = slot_class(slot)
     return series
 
 
-def _points(label: str, colour: str, size: float) -> viser.uplot.Series:
-    return viser.uplot.Series(
+def slot_class(target_id: str) -> str:
+    """The CSS class of a target's series (uPlot puts it on their legend entries)."""
+    return f"autotrack-slot-{target_id}"
+
+
+def legend_style(absent: Sequence[str]) -> str:
+    """A style sheet hiding the legend entries of the targets `absent` (empty: none hidden).
+    The charts are made once with a series per target number; this keeps their legends to the
+    targets that exist without making the charts again."""
+    if not absent:
+        return ""
+    selectors = ", ".join(f".uplot .u-legend .{slot_class(tid)}" for tid in absent)
+    return f"<style>{selectors} {{ display: none; }}</style>"
+
+
+def _points(label: str, colour: str, size: float, slot: str | None = None) -> viser.uplot.Series:
+    series = viser.uplot.Series(
         label=label,
         stroke=colour,
         width=0,
         points=viser.uplot.Series_Points(show=True, size=size, fill=colour),
     )
+    if slot is not None:
+        series["class"] = slot_class(slot)
+    return series
 
 
 def cursor_series() -> viser.uplot.Series:
@@ -218,11 +240,17 @@ def chart_layouts(
     pairs = list(zip(ids, colours, strict=True))
     theta: list[viser.uplot.Series] = []
     for tid, colour in pairs:
-        theta += [_points(f"{tid} θref", colour, 4), line_series(f"{tid} θ", colour)]
+        theta += [
+            _points(f"{tid} θref", colour, 4, slot=tid),
+            line_series(f"{tid} θ", colour, slot=tid),
+        ]
     return (
-        [*(line_series(tid, c) for tid, c in pairs), _points("aberrant", ABERRANT_COLOUR, 7)],
         [
-            *(line_series(f"{tid} η", c) for tid, c in pairs),
+            *(line_series(tid, c, slot=tid) for tid, c in pairs),
+            _points("aberrant", ABERRANT_COLOUR, 7),
+        ],
+        [
+            *(line_series(f"{tid} η", c, slot=tid) for tid, c in pairs),
             line_series("φ", "#868e96", dash=(6.0, 4.0)),
             _points("aberrant", ABERRANT_COLOUR, 7),
         ],
@@ -243,6 +271,7 @@ class SignalPlots:
         self._container = container if container is not None else gui.add_folder("Plots")
         with self._container:
             self._hint = gui.add_markdown("Draw a target to plot its signals here.")
+            self._legend_style = gui.add_html("")
         self._handles: list[viser.GuiUplotHandle] = []
         self._scales: list[dict | None] = []
         self._axes: list[tuple | None] = []
@@ -290,6 +319,9 @@ class SignalPlots:
         ids = slot_ids(history, self.slots)
         if ids != self._ids:
             self._build(ids, [_css(colour) for colour in history.colours])
+        style = legend_style([tid for tid in ids if tid not in history.target_ids])
+        if self._legend_style.content != style:
+            self._legend_style.content = style
         last = max(history.last_frame, cursor, 0)
         count = last + 1
         x_scale = {"time": False, "auto": False, "range": x_range(last, history.frame_count)}

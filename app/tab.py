@@ -117,7 +117,7 @@ class Tab:
             edit(lambda: submit(controller.assign_landmark, _landmark(targets.landmark.value)))
         )
         targets.apply_box.on_click(lambda _: submit(self.place_typed_box, targets.box.value))
-        targets.delete.on_click(lambda _: submit(controller.delete_selected))
+        targets.delete.on_click(lambda _: submit(self.delete_target))
         targets.boxes_json.on_click(lambda _: submit(self.load_boxes_json))
         targets.from_truth.on_click(
             lambda _: (
@@ -179,6 +179,12 @@ class Tab:
             raise InputError("a live source is open: Stop it to look back through its recording")
         command(*args)
 
+    def delete_target(self) -> None:
+        """Delete the chosen target and empty the typed box, which showed its box (applied
+        now, it would make a new target there)."""
+        self.controller.delete_selected()
+        self.panels.quiet.set(self.panels.targets.box, "value", "")
+
     def load_boxes_json(self) -> None:
         """boxes.json on frame 1, or on the frozen frame of a live source."""
         if self.live.state == FROZEN:
@@ -234,6 +240,8 @@ class Tab:
         if box is None:
             raise InputError("the dragged box misses the frame or is too thin; drag again")
         self.controller.place_box(box)
+        if not letterbox.rect_inside(screen_min, screen_max):
+            self.controller.message += " The drag passed the frame's edge: the box is cut there."
 
     def seek(self, frame_index: int) -> None:
         """Go to a frame chosen on the slider; tracking up to it stops at the next command."""

@@ -494,7 +494,7 @@ def test_four_drags_make_four_targets_tied_to_the_landmarks(studio) -> None:
     session = run.session_path
     assert session is not None and studio.recordings.writer_of(session) == tab.tab_id
     assert session.name in tab.panels.session.recording.content
-    assert "| T4 |" in tab.panels.targets.table.content
+    assert "| T4 " in tab.panels.targets.table.content
 
 
 def test_boxes_json_button_places_the_demo_boxes(studio) -> None:
@@ -513,7 +513,7 @@ def test_boxes_json_button_places_the_demo_boxes(studio) -> None:
 def _tracked_to(tab, target_id: str) -> int:
     """The 'tracked to' column of a target's row in the Targets table."""
     for row in tab.panels.targets.table.content.splitlines():
-        if row.startswith(f"| {target_id} |"):
+        if row.startswith(f"| {target_id} "):
             return int(row.strip("| ").split("|")[-1])
     return 0
 
@@ -605,11 +605,13 @@ def _tiles(run, target_id: str, frame_index: int) -> list[np.ndarray | None]:
 
 
 def test_map_panels_show_each_targets_own_maps_and_asr_weights(studio) -> None:
+    from app.panels import MAPS_PANELS
+
     tab, _ = _open_tab(studio)
     _draw_demo_boxes(tab)
     _set(tab.panels.playback.frame, 4)  # local variation exists from the third frame on
     assert tab.wait_idle()
-    _set(tab.panels.display.maps, "panels (per target)")
+    _set(tab.panels.display.maps, MAPS_PANELS)
     assert tab.wait_idle()
 
     run = tab.controller.run
@@ -741,7 +743,8 @@ def test_typed_box_landmark_and_delete_through_the_widgets(studio) -> None:
     assert tab.wait_idle()
     assert "T4" not in run.targets and targets.draw.value == "new target"
     assert targets.delete.disabled
-    _set(targets.box, "10, 20, 30, 40")  # choosing T4 showed its box there
+    assert targets.box.value == ""  # choosing T4 showed its box there: gone with it
+    _set(targets.box, "10, 20, 30, 40")
     _click(targets.apply_box)  # now a new target, and T4 once more
     assert tab.wait_idle()
     assert run.targets["T4"].results[0].box == (10.0, 20.0, 30.0, 40.0)
@@ -851,6 +854,19 @@ def test_uploaded_zip_opens_as_a_sequence(studio) -> None:
     shown = tab.panels.sequence.dropdown.value
     assert tab.controller.sequence_choices[shown] == tab.controller.sequence_path
     assert not tab.panels.targets.boxes_json.visible
+
+
+def test_a_drag_off_the_frame_is_refused_and_one_past_its_edge_is_cut(studio) -> None:
+    tab, _ = _open_tab(studio)
+    width, height = tab.controller.frame_size
+    _drag(tab, (100.0, -80.0, 60.0, 50.0))  # in the letterbox band above the frame
+    assert not tab.controller.run.targets and "misses the frame" in tab.controller.message
+    _drag(tab, (width - 30.0, height - 20.0, 60.0, 50.0))
+    (target,) = tab.controller.targets()
+    np.testing.assert_allclose(target.results[0].box, (width - 30, height - 20, 30, 20), atol=1.0)
+    assert "the box is cut there" in tab.controller.message
+    _drag(tab, (100.0, 100.0, 50.0, 40.0))  # inside: nothing said about edges
+    assert len(tab.controller.targets()) == 2 and "edge" not in tab.controller.message
 
 
 def test_drawing_needs_the_frame_canvas(studio) -> None:

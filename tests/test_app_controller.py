@@ -106,6 +106,13 @@ def test_boxes_json_places_one_target_per_landmark(controller) -> None:
     assert run.poses[0].valid and controller.cursor == 0
 
 
+def test_boxes_json_is_refused_once_targets_exist(controller) -> None:
+    controller.place_box(tuple(_demo_boxes()["A"]))
+    with pytest.raises(InputError, match="delete the 1 drawn first"):
+        controller.load_boxes_json()  # else T5, past the cap, on A's box again
+    assert list(controller.run.targets) == ["T1"]
+
+
 def test_a_boxes_json_list_is_assigned_to_landmarks_like_the_cli_does(tmp_path: Path) -> None:
     sequence = tmp_path / "flight"
     sequence.mkdir()
@@ -258,6 +265,8 @@ def test_a_tie_can_be_overridden_by_hand_and_the_search_keeps_it(controller) -> 
     controller.assign_landmark(second)  # T2 holds it: the two swap
     assert run.targets["T1"].landmark_id == second and run.targets["T2"].landmark_id == first
     assert controller.ties.manual == {"T1", "T2"} and "by hand" in controller.message
+    table = targets_table(controller)
+    assert f"| T1 → {second}* |" in table and "tied to its landmark by hand" in table
     controller.assign_landmark(None)
     assert run.targets["T1"].landmark_id is None
     assert second not in run.poses[0].used_landmarks
@@ -421,6 +430,24 @@ def test_reopening_continues_with_the_recorded_tracker_parameters(tmp_path: Path
         second.close()
 
 
+def test_a_session_is_listed_from_its_first_box_without_a_refresh(tmp_path: Path) -> None:
+    controller = _controller(tmp_path / "sessions")
+    try:
+        controller.open_initial()
+        assert controller.session_choices == {}  # nothing recorded before the app started
+        controller.place_box(tuple(_demo_boxes()["A"]))
+        recording = controller.run.session_path
+        assert recording is not None and recording.name in controller.session_choices
+        controller.step(1)
+        controller.open_initial()  # opening again finishes that recording: still listed
+        assert controller.session_choices[recording.name] == recording
+        controller.reopen(recording.name)
+        assert recording.name in controller.session_choices
+        assert controller.run.session_path.name in controller.session_choices  # its successor
+    finally:
+        controller.close()
+
+
 def test_uploads_and_typed_paths_stay_inside_the_allowed_folders(controller, tmp_path) -> None:
     opened = controller.sequence_path
     with pytest.raises(InputError, match="no such file or folder among those"):
@@ -527,13 +554,18 @@ class _FakeClient:
 
     def __init__(self) -> None:
         self.notifications: list[tuple[tuple, dict]] = []
+        self.handles: list[SimpleNamespace] = []
         self.downloads: list[tuple[tuple, dict]] = []
         self.camera = SimpleNamespace(image_width=1200, image_height=800, callbacks=[])
         self.camera.on_update = self.camera.callbacks.append
         self.atomic_entered = 0
 
-    def add_notification(self, *args, **kwargs) -> None:
+    def add_notification(self, *args, **kwargs) -> SimpleNamespace:
         self.notifications.append((args, kwargs))
+        handle = SimpleNamespace(removed=False)
+        handle.remove = lambda: setattr(handle, "removed", True)
+        self.handles.append(handle)
+        return handle
 
     def send_file_download(self, *args, **kwargs) -> None:
         self.downloads.append((args, kwargs))
@@ -561,8 +593,11 @@ def test_client_channel_passes_messages_downloads_and_the_camera_to_the_client()
     channel.notify("AutoTrack Studio", "broken", error=True)
     assert client.notifications == [
         (("AutoTrack Studio", "saved"), {"auto_close_seconds": 4.0, "color": None}),
-        (("AutoTrack Studio", "broken"), {"auto_close_seconds": None, "color": "red"}),
+        (("AutoTrack Studio", "broken"), {"auto_close_seconds": 15.0, "color": "red"}),
     ]
+    channel.notify("AutoTrack Studio", "saved again")
+    channel.notify("AutoTrack Studio", "broken again", error=True)  # replaces the last error
+    assert [handle.removed for handle in client.handles] == [False, True, False, False]
     channel.download("tracks.zip", b"zip")
     assert client.downloads == [(("tracks.zip", b"zip"), {"save_immediately": True})]
     assert channel.canvas_size() == (1200, 800)
