@@ -170,8 +170,10 @@ class TrackerParams:
             problems.append("variation_floor and confidence_memory must be in (0, 1]")
         if not 0 <= self.memory_rate <= 1 or not 0 < self.distractor_ratio <= 1:
             problems.append("memory_rate must be in [0, 1] and distractor_ratio in (0, 1]")
-        if self.num_aspects < 0 or self.velocity_weight < 0 or self.motion_prior < 0:
-            problems.append("num_aspects, velocity_weight and motion_prior must be >= 0")
+        if self.num_aspects < 0 or self.velocity_weight < 0:
+            problems.append("num_aspects and velocity_weight must be >= 0")
+        if self.motion_prior < 0:
+            problems.append("motion_prior must be >= 0")
         if self.confidence_gate < 0 or self.redetect_span < 0 or self.scale_model_min_side < 0:
             problems.append("confidence_gate, redetect_span, scale_model_min_side must be >= 0")
         if self.redetect_span and not (self.redetect_span > 1 and self.confidence_gate > 0):
