@@ -105,6 +105,10 @@ class TrackerParams:
     acting_asr: bool = False
     """ASR scaled so delta * log(Pi + 1) is the relative attenuation of the last h-step
     (robust.acting_spatial_window); the release's u is ~1e-6 of the h-step denominator."""
+    asr_relative: bool = False
+    """With the acting ASR, attenuate only cells whose variation exceeds the target region's
+    median (robust.acting_spatial_window): a partial change is repressed, a change of the whole
+    target (a turn, a scale or light change), which the filter must learn, is not."""
     confidence_gate: float = 0.0
     """Learn the filter and the scale model only when the detection's peak is at least this
     fraction of its running average and its APCE at least the square of it
@@ -134,6 +138,13 @@ class TrackerParams:
     """A second local maximum of the response at least this fraction of the first counts as a
     distractor (memory.distinct_peaks). 0.5: half the target's own peak, the level above which
     a response is read as multi-modal (a single target's sidelobes stay well below it)."""
+    motion_prior: float = 0.0
+    """With the long-term memory (without it the prior has nothing to weigh), weigh each
+    distinct peak also by a constant-velocity prior:
+    a Gaussian around the last confident frame's motion with this standard deviation, as a
+    fraction of the target's short side (memory.MotionPrior); 0 = off. 0.5: the separation at
+    which two peaks count as two objects, so a peak one such step further off the target's path
+    needs 1.65x (e^0.5) the appearance evidence of the other."""
     num_aspects: int = 0
     """Width / height ratios sampled by the aspect filter (aspect.AspectFilter: DSST's scale
     filter along the other axis of the (width, height) scale space), `scale_step` apart; 0 = the
@@ -161,6 +172,8 @@ class TrackerParams:
             problems.append("memory_rate must be in [0, 1] and distractor_ratio in (0, 1]")
         if self.num_aspects < 0 or self.velocity_weight < 0:
             problems.append("num_aspects and velocity_weight must be >= 0")
+        if self.motion_prior < 0:
+            problems.append("motion_prior must be >= 0")
         if self.confidence_gate < 0 or self.redetect_span < 0 or self.scale_model_min_side < 0:
             problems.append("confidence_gate, redetect_span, scale_model_min_side must be >= 0")
         if self.redetect_span and not (self.redetect_span > 1 and self.confidence_gate > 0):
@@ -203,6 +216,7 @@ class TrackerParams:
             or self.num_aspects
             or self.velocity_weight
             or self.memory_rate
+            or self.motion_prior
         )
 
     def with_colour_table(self, path: str | Path | None) -> TrackerParams:

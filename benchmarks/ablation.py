@@ -70,6 +70,8 @@ SENSITIVE = (
 CANDIDATES: dict[str, dict] = {
     f"{PLUS} + aspect filter": ABLATION["+ aspect filter"],
     f"{PLUS} + velocity prediction": ABLATION["+ velocity prediction"],
+    f"{PLUS} + motion prior": {"motion_prior": 0.5},
+    f"{PLUS} + relative ASR": {"asr_relative": True},
 }
 """Switches measured on top of `autotrack+` but left out of the preset (docs/benchmarks.md);
 their parameters' sensitivity is taken around these variants."""
@@ -117,7 +119,10 @@ def sensitivity_bases() -> list[tuple[str, str, float]]:
     """(variant perturbed, parameter, its value there) for every sensitivity row."""
     rows = [(PLUS, name, getattr(PRESETS[PLUS], name)) for name in SENSITIVE]
     for label, extra in CANDIDATES.items():
-        rows += [(label, name, value) for name, value in extra.items()]
+        # A bool switch has no value to halve: its sensitivity is that of the values it uses.
+        rows += [
+            (label, name, value) for name, value in extra.items() if not isinstance(value, bool)
+        ]
     return rows
 
 
@@ -276,7 +281,7 @@ def build_tables(sequences, results: dict, table: dict[str, dict]) -> str:
             [
                 *("faithful", "+RV", "+RV+ASR", "+gate", "+gate+redet", "+scale", "+aspect"),
                 *("+velocity", "+memory", PLUS, "+ no ASR", "+ no memory", "+ no RV/ASR"),
-                *("+ + aspect", "+ + velocity"),
+                *("+ + aspect", "+ + velocity", "+ + motion prior", "+ + rel. ASR"),
             ],
             strict=True,
         )

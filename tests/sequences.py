@@ -147,3 +147,38 @@ def passing_distractor_sequence(
             (round(target_x - target_size / 2), cy - target_size // 2, target_size, target_size)
         )
     return GeneratedSequence(frames=frames, boxes=np.array(boxes, dtype=np.float64))
+
+
+def appearing_twin_sequence(
+    num_frames: int = 40,
+    size_hw: tuple[int, int] = (240, 480),
+    target_size: int = 36,
+    speed: float = 6.0,
+    twin_from: int = 20,
+    change: float = 0.4,
+    seed: int = 5,
+) -> GeneratedSequence:
+    """A target moving right at `speed` px per frame; at frame `twin_from` its pattern changes
+    (blended by `change` with another one) and a twin with its first pattern appears, still,
+    one target side below the target's new position, off its path. The twin matches what every
+    appearance model learnt better than the target does (the mechanism of DTB70/Animal3); only
+    the target's motion tells them apart."""
+    rng = np.random.default_rng(seed)
+    height, width = size_hw
+    background = _clutter(rng, height, width)
+    texture = _target_texture(rng, target_size)
+    changed = (1.0 - change) * texture + change * _target_texture(rng, target_size)
+    top = height // 2 - target_size
+    twin_left = int(round(40.0 + speed * twin_from - target_size / 2))
+    frames, boxes = [], []
+    for index in range(num_frames):
+        left = int(round(40.0 + speed * index - target_size / 2))
+        frame = background.copy()
+        if index >= twin_from:
+            twin_rows = slice(top + target_size, top + 2 * target_size)
+            frame[twin_rows, twin_left : twin_left + target_size] = texture
+        pattern = changed if index >= twin_from else texture
+        frame[top : top + target_size, left : left + target_size] = pattern
+        frames.append(np.clip(frame, 0, 255).astype(np.uint8))
+        boxes.append((left, top, target_size, target_size))
+    return GeneratedSequence(frames=frames, boxes=np.array(boxes, dtype=np.float64))

@@ -11,8 +11,8 @@ from autotrack import AutoTrack
 from autotrack.errors import InputError
 from autotrack.evaluation.metrics import center_errors
 from autotrack.params import PRESETS, TrackerParams
-from autotrack.tracker import dcf, memory
-from tests.sequences import passing_distractor_sequence
+from autotrack.tracker import dcf, memory, motion
+from tests.sequences import appearing_twin_sequence, passing_distractor_sequence
 
 
 def _bump(grid, centre, height, sigma=1.2):
@@ -43,6 +43,39 @@ def test_the_memory_decides_between_two_peaks_and_the_sub_cell_peak_is_refined()
     assert memory.disambiguate(short_term, agreeing, 0.5, 3.0) == (None, True)
     single = _bump(grid, (2, 3), 1.0)
     assert memory.disambiguate(single, long_term, 0.5, 3.0) == (None, False)
+
+
+def test_the_motion_prior_prefers_the_peak_on_the_target_path():
+    grid = (40, 40)
+    # The off-path peak has a little more appearance evidence in both filters (DTB70/Animal3).
+    short_term = _bump(grid, (0, 1), 0.95) + _bump(grid, (3, 5), 1.0)
+    long_term = _bump(grid, (0, 1), 0.9) + _bump(grid, (3, 5), 1.0)
+    assert memory.disambiguate(short_term, long_term, 0.5, 3.0) == (None, True)
+    on_path = motion.MotionPrior(predicted=(0.2, 0.8), sigma=3.0)
+    chosen, ambiguous = memory.disambiguate(short_term, long_term, 0.5, 3.0, on_path)
+    assert ambiguous and chosen is not None
+    assert chosen[0] == pytest.approx(0, abs=0.1) and chosen[1] == pytest.approx(1, abs=0.1)
+    # Far more evidence off the path still wins: the prior weighs, it does not veto.
+    weak = _bump(grid, (0, 1), 0.55) + _bump(grid, (3, 5), 1.0)
+    weak_memory = _bump(grid, (0, 1), 0.3) + _bump(grid, (3, 5), 1.0)
+    assert memory.disambiguate(weak, weak_memory, 0.5, 3.0, on_path) == (None, True)
+    assert on_path.likelihood(0.2, 0.8) == pytest.approx(1.0)
+    assert on_path.likelihood(3.2, 0.8) == pytest.approx(np.exp(-0.5))
+
+
+def test_motion_prior_keeps_the_target_when_a_better_matching_twin_appears_off_its_path():
+    plus = PRESETS["autotrack+"]
+    with_prior = replace(plus, motion_prior=0.5)
+    stays = {0.0: 0, 0.5: 0}
+    for seed in (5, 6, 7, 8):
+        sequence = appearing_twin_sequence(seed=seed)
+        for params in (replace(plus, motion_prior=0.0), with_prior):
+            errors = _centre_errors(params, sequence)
+            stays[params.motion_prior] += bool(errors[-10:].max() < 10)
+    # Without the prior the tracker takes the twin every time; with it, it stays on the target
+    # (on one seed of four the target's own peak is too weak to be a candidate at all).
+    assert stays[0.0] == 0
+    assert stays[0.5] >= 3
 
 
 def test_memory_is_a_slow_running_average_of_the_learnt_filters():
@@ -76,6 +109,12 @@ def test_memory_returns_to_the_target_after_a_look_alike_passed_in_front_of_it()
 def test_memory_is_off_in_the_faithful_presets_and_bad_values_are_refused():
     assert all(p.memory_rate == 0 for name, p in PRESETS.items() if name != "autotrack+")
     assert TrackerParams(memory_rate=0.01).beyond_release
-    for change in ({"memory_rate": -0.1}, {"memory_rate": 1.5}, {"distractor_ratio": 0}):
+    assert TrackerParams(memory_rate=0.01, motion_prior=0.5).beyond_release
+    for change in (
+        {"memory_rate": -0.1},
+        {"memory_rate": 1.5},
+        {"distractor_ratio": 0},
+        {"memory_rate": 0.01, "motion_prior": -1.0},
+    ):
         with pytest.raises(InputError):
             TrackerParams(**change)

@@ -100,6 +100,33 @@ def test_acting_asr_changes_the_learnt_filter_where_the_release_asr_does_not():
     assert relative(train(acting)) > 0.05
 
 
+def test_relative_asr_represses_a_varying_part_and_not_a_uniformly_changing_target():
+    grid, region_size = (16, 16), (6, 6)
+    base = regularization.base_spatial_window(grid, region_size, 1e5, 1e-3)
+    region = regularization.target_region(grid, region_size)
+    cells = grid[0] * grid[1]
+
+    def gain(variation, relative):
+        window = robust.acting_spatial_window(base, variation, region, 0.2, 1.0, 1.0, relative)
+        return (cells / (window.astype(np.float64) ** 2 + cells))[region]  # eq. 12, gamma = 1
+
+    # The whole target changed alike (a turn, a change of light): absolute ASR attenuates every
+    # cell, relative ASR none, so the filter learns the new appearance.
+    uniform = np.zeros(grid, np.float32)
+    uniform[region] = 4.0
+    assert gain(uniform, relative=False).max() < 0.93
+    np.testing.assert_allclose(gain(uniform, relative=True), 1.0, atol=1e-6)
+    # One part varied far more than the rest (a partial occluder): only that part is repressed,
+    # by the attenuation of its excess variation over the target's median.
+    partial = uniform.copy()
+    rows, cols = region
+    partial[rows.start : rows.start + 2, cols.start : cols.start + 2] = 40.0
+    relative_gain = gain(partial, relative=True)
+    excess = np.log(41.0) - np.log(5.0)
+    assert relative_gain[:2, :2] == pytest.approx(1.0 / (1.0 + (0.2 * excess) ** 2), rel=1e-4)
+    np.testing.assert_allclose(relative_gain[2:, :], 1.0, atol=1e-6)
+
+
 # -- calibrated confidence -------------------------------------------------------------------
 
 

@@ -12,7 +12,9 @@ short-term filter, no second training.
 When the short-term response has a second distinct peak at least `distractor_ratio` of the
 first (a distractor in the search region), each peak is scored by the product of the two
 filters' responses there (the joint evidence of the short-term and the long-term appearance)
-and the tracker takes the best; without a second peak nothing changes.
+and the tracker takes the best; without a second peak nothing changes. With `motion_prior` on,
+the product also takes a constant-velocity prior on each peak's displacement, so of two
+look-alikes the one on the target's path wins unless the other has clearly more evidence.
 """
 
 from __future__ import annotations
@@ -22,6 +24,7 @@ import math
 import numpy as np
 
 from autotrack.tracker import dcf
+from autotrack.tracker.motion import MotionPrior
 
 
 class LongTermMemory:
@@ -72,16 +75,25 @@ def _wrap(delta: int, size: int) -> int:
     return (delta + size // 2) % size - size // 2
 
 
-def choose_peak(short_term: np.ndarray, long_term: np.ndarray, peaks: list[tuple[int, int]]) -> int:
-    """Index of the peak with the largest product of the two responses (negative counts as 0).
+def choose_peak(
+    short_term: np.ndarray,
+    long_term: np.ndarray,
+    peaks: list[tuple[int, int]],
+    motion: MotionPrior | None = None,
+) -> int:
+    """Index of the peak with the largest product of the evidence (negative counts as 0).
 
-    Each response is taken at its best cell within one cell of the peak, so a one-cell
-    disagreement between the two filters does not decide.
+    The evidence is the two responses, each taken at its best cell within one cell of the peak
+    (so a one-cell disagreement between the two filters does not decide), times the motion
+    prior's likelihood of the peak's displacement when a prior is given.
     """
-    scores = [
-        max(_near_max(short_term, peak), 0.0) * max(_near_max(long_term, peak), 0.0)
-        for peak in peaks
-    ]
+    height, width = short_term.shape
+    scores = []
+    for peak in peaks:
+        score = max(_near_max(short_term, peak), 0.0) * max(_near_max(long_term, peak), 0.0)
+        if motion is not None:
+            score *= motion.likelihood(_wrap(peak[0], height), _wrap(peak[1], width))
+        scores.append(score)
     return int(np.argmax(scores)) if max(scores) > 0 else 0
 
 
@@ -120,16 +132,18 @@ def disambiguate(
     memory_response: np.ndarray,
     ratio: float,
     separation: float,
+    motion: MotionPrior | None = None,
 ) -> tuple[tuple[float, float, float] | None, bool]:
     """(the peak to take instead of the global maximum, or None; whether a distractor is present).
 
     With one distinct peak nothing changes (None, False). With several, the peak with the most
-    joint evidence (`choose_peak`) is taken; if that is the global maximum, (None, True).
+    joint evidence (`choose_peak`, with the motion prior if given) is taken; if that is the
+    global maximum, (None, True).
     """
     peaks = distinct_peaks(response, ratio, separation)
     if len(peaks) < 2:
         return None, False
-    chosen = choose_peak(response, memory_response, peaks)
+    chosen = choose_peak(response, memory_response, peaks, motion)
     if chosen == 0:
         return None, True
     return subcell_peak(response, peaks[chosen]), True

@@ -55,6 +55,7 @@ def acting_spatial_window(
     delta: float,
     reference_penalty: float,
     lambda_spatial: float,
+    relative: bool = False,
 ) -> np.ndarray:
     """ASR (eq. 3) scaled so it changes what is learnt.
 
@@ -73,7 +74,10 @@ def acting_spatial_window(
     scale = math.sqrt(reference_penalty * cells / lambda_spatial)
     window = base_window.copy()
     with np.errstate(invalid="ignore", over="ignore"):
-        values = delta * np.log(variation_centred[region].astype(np.float64) + 1.0) * scale
+        log_variation = np.log(variation_centred[region].astype(np.float64) + 1.0)
+        if relative:  # only what varied more than the target as a whole (a part, not a turn)
+            log_variation = np.maximum(log_variation - np.nanmedian(log_variation), 0.0)
+        values = delta * log_variation * scale
     floor = float(base_window[region].min())
     outside = float(base_window.max())
     values = np.where(np.isfinite(values), np.maximum(values, floor), outside)

@@ -17,7 +17,7 @@ import numpy as np
 from autotrack.errors import BoxError, InputError
 from autotrack.params import TrackerParams
 from autotrack.result import TrackResult
-from autotrack.tracker import dcf, memory, redetect, regularization, robust
+from autotrack.tracker import dcf, memory, motion, redetect, regularization, robust
 from autotrack.tracker.aspect import AspectFilter
 from autotrack.tracker.features import extract_features, feature_dim, is_grey, load_colour_table
 from autotrack.tracker.sampling import search_patch
@@ -153,6 +153,7 @@ class AutoTrack:
         self.previous_response: np.ndarray | None = None
         self.previous_displacement = (0.0, 0.0)
         self.velocity = np.zeros(2)
+        self.motion = motion.MotionModel(p.confidence_memory) if p.motion_prior else None
         result = TrackResult(
             frame_index=0,
             box=self._box(),
@@ -208,9 +209,10 @@ class AutoTrack:
         best_scale = None
         translation = dcf.matlab_round(np.array([disp_row, disp_col]) * p.cell_size * self.scale)
         self.position = self.position + translation
-        self.velocity = (
-            self.position - start if confident and start is not None else 0.0 * translation
-        )
+        moved = self.position - start if confident and start is not None else None
+        self.velocity = moved if moved is not None else 0.0 * translation
+        if self.motion is not None:
+            self.motion.observe(moved)
         # A low-confidence frame (occluder, loss) changes neither the filter nor the scale.
         if confident:
             best_scale, self.scale = self.scale_filter.detect(image, self.position, self.scale)
@@ -278,8 +280,9 @@ class AutoTrack:
                 if not aberrant:
                     theta_ref = regularization.temporal_reference(eta, p.zeta, p.nu)
             if p.adaptive_spatial and p.acting_asr:
+                asr = (p.delta, *self.asr_reference, p.asr_relative)
                 self.spatial_window = robust.acting_spatial_window(
-                    self.base_window, variation, self.region, p.delta, *self.asr_reference
+                    self.base_window, variation, self.region, *asr
                 )
             elif p.adaptive_spatial:
                 self.spatial_window = regularization.adaptive_spatial_window(
@@ -308,7 +311,11 @@ class AutoTrack:
             return None, False
         memory_response = self.memory.response(zf, self.grid_size)
         ratio, separation = self.params.distractor_ratio, self.peak_separation
-        return memory.disambiguate(response, memory_response, ratio, separation)
+        prior = None
+        if self.motion is not None:
+            floor = self.params.motion_prior * min(self._box_size_hw())
+            prior = self.motion.prior(floor, self.params.cell_size * self.scale)
+        return memory.disambiguate(response, memory_response, ratio, separation, prior)
 
     def _is_confident(self, peak_score: float, response: np.ndarray) -> bool:
         """Whether this detection clears the confidence gate (always True without a gate)."""
