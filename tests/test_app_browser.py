@@ -11,6 +11,8 @@ import io
 import json
 import time
 import zipfile
+from collections.abc import Iterator
+from contextlib import contextmanager
 from pathlib import Path
 
 import cv2
@@ -77,6 +79,32 @@ def studio(tmp_path: Path):
     server.stop()
 
 
+@contextmanager
+def studio_page(server, profile: Path, **options) -> Iterator[tuple[object, object]]:
+    """A headless Chromium page on the studio's URL and the server's tab for it (`options`
+    go to playwright's browser context, e.g. accept_downloads=True)."""
+    from playwright.sync_api import sync_playwright
+
+    with sync_playwright() as playwright:
+        browser = playwright.chromium.launch_persistent_context(
+            str(profile),
+            executable_path=str(CHROMIUM),
+            headless=True,
+            args=CHROMIUM_FLAGS,
+            viewport=VIEWPORT,
+            **options,
+        )
+        try:
+            page = browser.new_page()
+            page.goto(server.url)
+            _wait_for(lambda: len(server.tabs) == 1, what="the tab to connect")
+            tab = next(iter(server.tabs.values()))
+            assert tab.wait_idle()
+            yield page, tab
+        finally:
+            browser.close()
+
+
 def _shift_drag(page, start: tuple[float, float], end: tuple[float, float]) -> None:
     page.keyboard.down("Shift")
     page.mouse.move(*start)
@@ -92,7 +120,6 @@ def _rate(times: list[float], start: float, stop: float) -> float:
 
 
 def test_draw_play_inspect_and_download_in_chromium(studio, tmp_path: Path) -> None:
-    from playwright.sync_api import sync_playwright
 
     from app.panels import CANVAS_3D
     from app.plots import x_range
@@ -100,138 +127,118 @@ def test_draw_play_inspect_and_download_in_chromium(studio, tmp_path: Path) -> N
 
     ARTIFACTS.mkdir(exist_ok=True)
     boxes = json.loads((DEMO / "boxes.json").read_text())
-    with sync_playwright() as playwright:
-        browser = playwright.chromium.launch_persistent_context(
-            str(tmp_path / "profile"),
-            executable_path=str(CHROMIUM),
-            headless=True,
-            args=CHROMIUM_FLAGS,
-            viewport=VIEWPORT,
-            accept_downloads=True,
+    with studio_page(studio, tmp_path / "profile", accept_downloads=True) as (page, tab):
+        display, controller = tab.display, tab.controller
+        _wait_for(lambda: display.letterbox is not None, what="the frame on the canvas", tab=tab)
+        # The software-WebGL warning sits over the canvas's top-left corner.
+        warning_close = page.locator(".mantine-Notification-closeButton")
+        if warning_close.count():
+            warning_close.first.click()
+        canvas = max(
+            (c.bounding_box() for c in page.query_selector_all("canvas")),
+            key=lambda b: b["width"] * b["height"],
         )
-        try:
-            page = browser.new_page()
-            page.goto(studio.url)
-            _wait_for(lambda: len(studio.tabs) == 1, what="the tab to connect")
-            tab = next(iter(studio.tabs.values()))
-            assert tab.wait_idle()
-            display, controller = tab.display, tab.controller
+        letterbox = display.letterbox
+
+        def page_point(x: float, y: float) -> tuple[float, float]:
+            u, v = letterbox.frame_to_screen(x, y)
+            return (canvas["x"] + u * canvas["width"], canvas["y"] + v * canvas["height"])
+
+        _wait_for(lambda: "*to draw*" in tab.panels.targets.table.content, what="landmarks")
+        page.screenshot(path=str(ARTIFACTS / "app-landmarks-to-draw.png"))
+        for count, landmark_id in enumerate(SHUFFLED, start=1):
+            x, y, w, h = boxes[landmark_id]
+            _shift_drag(page, page_point(x, y), page_point(x + w, y + h))
             _wait_for(
-                lambda: display.letterbox is not None, what="the frame on the canvas", tab=tab
+                lambda n=count: len(controller.run.targets) == n, what=f"box {count}", tab=tab
             )
-            # The software-WebGL warning sits over the canvas's top-left corner.
-            warning_close = page.locator(".mantine-Notification-closeButton")
-            if warning_close.count():
-                warning_close.first.click()
-            canvas = max(
-                (c.bounding_box() for c in page.query_selector_all("canvas")),
-                key=lambda b: b["width"] * b["height"],
-            )
-            letterbox = display.letterbox
+        assert tab.wait_idle()
+        run = controller.run
+        assert controller.cursor == 0  # all four drawn on frame 1
+        # Tied by the correspondence search, whatever the drawing order.
+        assert [t.landmark_id for t in run.targets.values()] == list(SHUFFLED)
+        assert controller.ties.last.warning == ""
+        _wait_for(lambda: "px |" in tab.panels.targets.table.content, what="the residuals")
+        for target in run.targets.values():
+            drawn = target.results[0].box
+            np.testing.assert_allclose(drawn, boxes[target.landmark_id], atol=2.0)
+        page.screenshot(path=str(ARTIFACTS / "app-four-boxes.png"))
 
-            def page_point(x: float, y: float) -> tuple[float, float]:
-                u, v = letterbox.frame_to_screen(x, y)
-                return (canvas["x"] + u * canvas["width"], canvas["y"] + v * canvas["height"])
+        # Play 30 frames as fast as tracking goes and watch the rates.
+        tab.panels.playback.unlimited.value = True
+        page.get_by_role("button", name="Play").click()
+        _wait_for(lambda: controller.cursor >= 1, what="playback to start", tab=tab)
+        started, start_frame = time.monotonic(), controller.cursor
+        _wait_for(lambda: controller.cursor >= PLAY_FRAMES, what=f"{PLAY_FRAMES} frames", tab=tab)
+        finished, end_frame = time.monotonic(), controller.cursor
+        page.get_by_role("button", name="Pause").click()
+        assert tab.wait_idle()
+        last = controller.cursor
+        assert last >= PLAY_FRAMES and run.tracked_until == last
+        for target in run.targets.values():
+            assert sorted(target.results) == list(range(last + 1))
+        rates = {
+            "targets": len(run.targets),
+            "frame_size": list(run.frames.frame_size),
+            "frames_tracked_per_s": (end_frame - start_frame) / (finished - started),
+            "tracking_only_frames_per_s": float(
+                1.0 / np.nanmedian(run.frame_seconds[1 : last + 1])
+            ),
+            "canvas_frames_per_s": _rate(display.stats.canvas_times, started, finished),
+            "video_panel_frames_per_s": _rate(display.stats.video_times, started, finished),
+            "canvas_cap": float(tab.panels.display.canvas_fps.value),
+        }
 
-            _wait_for(lambda: "*to draw*" in tab.panels.targets.table.content, what="landmarks")
-            page.screenshot(path=str(ARTIFACTS / "app-landmarks-to-draw.png"))
-            for count, landmark_id in enumerate(SHUFFLED, start=1):
-                x, y, w, h = boxes[landmark_id]
-                _shift_drag(page, page_point(x, y), page_point(x + w, y + h))
-                _wait_for(
-                    lambda n=count: len(controller.run.targets) == n, what=f"box {count}", tab=tab
-                )
-            assert tab.wait_idle()
-            run = controller.run
-            assert controller.cursor == 0  # all four drawn on frame 1
-            # Tied by the correspondence search, whatever the drawing order.
-            assert [t.landmark_id for t in run.targets.values()] == list(SHUFFLED)
-            assert controller.ties.last.warning == ""
-            _wait_for(lambda: "px |" in tab.panels.targets.table.content, what="the residuals")
-            for target in run.targets.values():
-                drawn = target.results[0].box
-                np.testing.assert_allclose(drawn, boxes[target.landmark_id], atol=2.0)
-            page.screenshot(path=str(ARTIFACTS / "app-four-boxes.png"))
+        # Overlays, plots and the trajectory reached the browser.
+        _wait_for(lambda: display.view3d.segments_sent > 0, what="the trajectory", tab=tab)
+        assert display.stats.overlay_maps > 0 and display.stats.canvas_frames > 0
+        assert sum(pose.valid for pose in run.poses.values()) > PLAY_FRAMES // 2
+        # The four charts were drawn in the page with every tracked frame (viser's uPlot
+        # component registers each chart under window.__viserTestpoints).
+        # (+2: the two x points of the current-frame line)
+        _wait_for(
+            lambda: sorted(row["frames"] for row in page.evaluate(CHARTS_JS)) == [last + 3] * 4,
+            what="four charts with every frame",
+            tab=tab,
+        )
+        charts = {row["labels"][1]: row for row in page.evaluate(CHARTS_JS)}
+        assert all(row["x_max"] == x_range(last, run.frame_count)[1] for row in charts.values())
+        peaks = np.concatenate(
+            [t.signals["peak_score"][1 : last + 1] for t in run.targets.values()]
+        )
+        peak_chart = charts["T1"]  # fitted to the peaks, not (-0.1, 1.1)
+        assert peak_chart["y_min"] <= peaks.min() and peaks.max() <= peak_chart["y_max"]
+        assert peak_chart["y_max"] - peak_chart["y_min"] < 2 * np.ptp(peaks) + 0.05
+        eta_chart = charts["T1 η"]  # log scale holding the threshold φ
+        assert eta_chart["y_min"] < run.params.phi < eta_chart["y_max"]
+        page.screenshot(path=str(ARTIFACTS / "app-after-30-frames.png"))
 
-            # Play 30 frames as fast as tracking goes and watch the rates.
-            tab.panels.playback.unlimited.value = True
-            page.get_by_role("button", name="Play").click()
-            _wait_for(lambda: controller.cursor >= 1, what="playback to start", tab=tab)
-            started, start_frame = time.monotonic(), controller.cursor
-            _wait_for(
-                lambda: controller.cursor >= PLAY_FRAMES, what=f"{PLAY_FRAMES} frames", tab=tab
-            )
-            finished, end_frame = time.monotonic(), controller.cursor
-            page.get_by_role("button", name="Pause").click()
-            assert tab.wait_idle()
-            last = controller.cursor
-            assert last >= PLAY_FRAMES and run.tracked_until == last
-            for target in run.targets.values():
-                assert sorted(target.results) == list(range(last + 1))
-            rates = {
-                "targets": len(run.targets),
-                "frame_size": list(run.frames.frame_size),
-                "frames_tracked_per_s": (end_frame - start_frame) / (finished - started),
-                "tracking_only_frames_per_s": float(
-                    1.0 / np.nanmedian(run.frame_seconds[1 : last + 1])
-                ),
-                "canvas_frames_per_s": _rate(display.stats.canvas_times, started, finished),
-                "video_panel_frames_per_s": _rate(display.stats.video_times, started, finished),
-                "canvas_cap": float(tab.panels.display.canvas_fps.value),
-            }
+        page.get_by_label("Canvas", exact=True).click()
+        page.get_by_role("option", name=CANVAS_3D).click()
+        _wait_for(
+            lambda: tab.panels.display.canvas.value == CANVAS_3D, what="the 3-D view", tab=tab
+        )
+        _wait_for(
+            lambda: display.view3d.frustum_state != "none", what="the camera frustum", tab=tab
+        )
+        time.sleep(1.5)  # let software WebGL draw the scene before the screenshot
+        page.screenshot(path=str(ARTIFACTS / "app-3d-view.png"))
 
-            # Overlays, plots and the trajectory reached the browser.
-            _wait_for(lambda: display.view3d.segments_sent > 0, what="the trajectory", tab=tab)
-            assert display.stats.overlay_maps > 0 and display.stats.canvas_frames > 0
-            assert sum(pose.valid for pose in run.poses.values()) > PLAY_FRAMES // 2
-            # The four charts were drawn in the page with every tracked frame (viser's uPlot
-            # component registers each chart under window.__viserTestpoints).
-            # (+2: the two x points of the current-frame line)
-            _wait_for(
-                lambda: sorted(row["frames"] for row in page.evaluate(CHARTS_JS)) == [last + 3] * 4,
-                what="four charts with every frame",
-                tab=tab,
-            )
-            charts = {row["labels"][1]: row for row in page.evaluate(CHARTS_JS)}
-            assert all(row["x_max"] == x_range(last, run.frame_count)[1] for row in charts.values())
-            peaks = np.concatenate(
-                [t.signals["peak_score"][1 : last + 1] for t in run.targets.values()]
-            )
-            peak_chart = charts["T1"]  # fitted to the peaks, not (-0.1, 1.1)
-            assert peak_chart["y_min"] <= peaks.min() and peaks.max() <= peak_chart["y_max"]
-            assert peak_chart["y_max"] - peak_chart["y_min"] < 2 * np.ptp(peaks) + 0.05
-            eta_chart = charts["T1 η"]  # log scale holding the threshold φ
-            assert eta_chart["y_min"] < run.params.phi < eta_chart["y_max"]
-            page.screenshot(path=str(ARTIFACTS / "app-after-30-frames.png"))
-
-            page.get_by_label("Canvas", exact=True).click()
-            page.get_by_role("option", name=CANVAS_3D).click()
-            _wait_for(
-                lambda: tab.panels.display.canvas.value == CANVAS_3D, what="the 3-D view", tab=tab
-            )
-            _wait_for(
-                lambda: display.view3d.frustum_state != "none", what="the camera frustum", tab=tab
-            )
-            time.sleep(1.5)  # let software WebGL draw the scene before the screenshot
-            page.screenshot(path=str(ARTIFACTS / "app-3d-view.png"))
-
-            # Downloads.
-            page.get_by_text("Session", exact=True).click()
-            saved: dict[str, Path] = {}
-            for label in (
-                "Download tracks (zip)",
-                "Download poses (TUM)",
-                "Download session (MCAP)",
-            ):
-                with page.expect_download(timeout=30_000) as download_info:
-                    page.get_by_role("button", name=label).click()
-                download = download_info.value
-                target = tmp_path / download.suggested_filename
-                download.save_as(target)
-                saved[label] = target
-            page.screenshot(path=str(ARTIFACTS / "app-downloads.png"))
-        finally:
-            browser.close()  # before the server stops: stop() waits for connected clients
+        # Downloads.
+        page.get_by_text("Session", exact=True).click()
+        saved: dict[str, Path] = {}
+        for label in (
+            "Download tracks (zip)",
+            "Download poses (TUM)",
+            "Download session (MCAP)",
+        ):
+            with page.expect_download(timeout=30_000) as download_info:
+                page.get_by_role("button", name=label).click()
+            download = download_info.value
+            target = tmp_path / download.suggested_filename
+            download.save_as(target)
+            saved[label] = target
+        page.screenshot(path=str(ARTIFACTS / "app-downloads.png"))
 
     with zipfile.ZipFile(io.BytesIO(saved["Download tracks (zip)"].read_bytes())) as archive:
         assert sorted(archive.namelist()) == ["T1.txt", "T2.txt", "T3.txt", "T4.txt", "tracks.csv"]
@@ -269,7 +276,6 @@ def test_start_from_ground_truth_and_read_the_scores_in_chromium(tmp_path: Path,
     play to the end, read P@20 and AUC on the page and compare them with `autotrack track`."""
     if not CHROMIUM.exists() or not GULL1.is_dir():
         pytest.skip("needs /usr/bin/chromium and ../shared/data/sequences/DTB70/Gull1")
-    from playwright.sync_api import sync_playwright
 
     from app.config import AppConfig
     from app.panels import MAPS_PANELS, MAPS_VARIATION
@@ -283,48 +289,33 @@ def test_start_from_ground_truth_and_read_the_scores_in_chromium(tmp_path: Path,
         AppConfig(port=0, sequence=sequence, sessions_dir=tmp_path / "sessions", demo_dir=DEMO)
     )
     try:
-        with sync_playwright() as playwright:
-            browser = playwright.chromium.launch_persistent_context(
-                str(tmp_path / "profile"),
-                executable_path=str(CHROMIUM),
-                headless=True,
-                args=CHROMIUM_FLAGS,
-                viewport=VIEWPORT,
+        with studio_page(studio, tmp_path / "profile") as (page, tab):
+            controller = tab.controller
+            page.get_by_role("button", name="Start from ground truth").click()
+            _wait_for(lambda: len(controller.run.targets) == 1, what="the target", tab=tab)
+            page.get_by_label("Show ground truth").check()
+            page.get_by_role("tab", name="Ground truth").click()
+            tab.panels.playback.unlimited.value = True
+            page.get_by_role("button", name="Play").click()
+            _wait_for(
+                lambda: controller.cursor == GT_FRAMES - 1 and not controller.playing,
+                what="the last frame",
+                tab=tab,
             )
-            try:
-                page = browser.new_page()
-                page.goto(studio.url)
-                _wait_for(lambda: len(studio.tabs) == 1, what="the tab to connect")
-                tab = next(iter(studio.tabs.values()))
-                assert tab.wait_idle()
-                controller = tab.controller
-                page.get_by_role("button", name="Start from ground truth").click()
-                _wait_for(lambda: len(controller.run.targets) == 1, what="the target", tab=tab)
-                page.get_by_label("Show ground truth").check()
-                page.get_by_role("tab", name="Ground truth").click()
-                tab.panels.playback.unlimited.value = True
-                page.get_by_role("button", name="Play").click()
-                _wait_for(
-                    lambda: controller.cursor == GT_FRAMES - 1 and not controller.playing,
-                    what="the last frame",
-                    tab=tab,
-                )
-                scores = page.get_by_text("against the ground truth")
-                _wait_for(lambda: f"frames 1-{GT_FRAMES}" in scores.inner_text(), what="scores")
-                shown = scores.inner_text()
-                charts = {row["labels"][1]: row for row in page.evaluate(CHARTS_JS)}
-                page.screenshot(path=str(ARTIFACTS / "app-ground-truth.png"))
+            scores = page.get_by_text("against the ground truth")
+            _wait_for(lambda: f"frames 1-{GT_FRAMES}" in scores.inner_text(), what="scores")
+            shown = scores.inner_text()
+            charts = {row["labels"][1]: row for row in page.evaluate(CHARTS_JS)}
+            page.screenshot(path=str(ARTIFACTS / "app-ground-truth.png"))
 
-                _choose(page, "Maps", MAPS_VARIATION)
-                time.sleep(1.0)
-                page.screenshot(path=str(ARTIFACTS / "app-local-variation.png"))
-                _choose(page, "Maps", MAPS_PANELS)
-                page.get_by_role("tab", name="Maps").click()
-                _wait_for(lambda: tab.display.map_panels.shown(), what="the map panels")
-                time.sleep(1.0)
-                page.screenshot(path=str(ARTIFACTS / "app-map-panels.png"))
-            finally:
-                browser.close()
+            _choose(page, "Maps", MAPS_VARIATION)
+            time.sleep(1.0)
+            page.screenshot(path=str(ARTIFACTS / "app-local-variation.png"))
+            _choose(page, "Maps", MAPS_PANELS)
+            page.get_by_role("tab", name="Maps").click()
+            _wait_for(lambda: tab.display.map_panels.shown(), what="the map panels")
+            time.sleep(1.0)
+            page.screenshot(path=str(ARTIFACTS / "app-map-panels.png"))
     finally:
         studio.stop()
 
@@ -388,87 +379,70 @@ def live_studio(tmp_path: Path):
 
 
 def test_a_live_source_is_tracked_in_chromium(live_studio, tmp_path: Path) -> None:
-    from playwright.sync_api import sync_playwright
 
     from app.live import FROZEN, OFF, PREVIEW, TRACKING
     from autotrack.sessions import open_session
 
     ARTIFACTS.mkdir(exist_ok=True)
-    with sync_playwright() as playwright:
-        browser = playwright.chromium.launch_persistent_context(
-            str(tmp_path / "profile"),
-            executable_path=str(CHROMIUM),
-            headless=True,
-            args=CHROMIUM_FLAGS,
-            viewport=VIEWPORT,
+    with studio_page(live_studio, tmp_path / "profile") as (page, tab):
+        live, controller, stats = tab.live, tab.controller, tab.display.stats
+        _text_input(page, "Source").fill("flight.avi")
+        _text_input(page, "Live scene file").fill(str(DEMO / "scene.json"))
+        _wait_for(
+            lambda: tab.panels.live.scene.value == str(DEMO / "scene.json"),
+            what="the typed source and scene to reach the server",
         )
-        try:
-            page = browser.new_page()
-            page.goto(live_studio.url)
-            _wait_for(lambda: len(live_studio.tabs) == 1, what="the tab to connect")
-            tab = next(iter(live_studio.tabs.values()))
-            assert tab.wait_idle()
-            live, controller, stats = tab.live, tab.controller, tab.display.stats
-            _text_input(page, "Source").fill("flight.avi")
-            _text_input(page, "Live scene file").fill(str(DEMO / "scene.json"))
-            _wait_for(
-                lambda: tab.panels.live.scene.value == str(DEMO / "scene.json"),
-                what="the typed source and scene to reach the server",
-            )
-            page.get_by_role("button", name="Open live source").click()
-            _wait_for(lambda: live.state == PREVIEW, what="the preview", tab=tab)
-            _wait_for(lambda: stats.video_targets[0] > 5, what="the preview frames", tab=tab)
-            page.get_by_role("button", name="Freeze frame").click()
-            _wait_for(lambda: live.state == FROZEN, what="the frozen frame", tab=tab)
-            page.get_by_role("button", name="Load boxes.json").click()
-            _wait_for(lambda: len(controller.run.targets) == 4, what="the four boxes", tab=tab)
-            frozen = controller.cursor
-            page.screenshot(path=str(ARTIFACTS / "app-live-frozen-boxes.png"))
-            page.get_by_role("button", name="Start tracking").click()
-            _wait_for(lambda: live.state == TRACKING, what="tracking", tab=tab)
-            # Past the hover and into the flight, the page gets the tracked boxes.
-            _wait_for(lambda: controller.cursor > 170, timeout=90, what="the flight", tab=tab)
-            _wait_for(
-                lambda: (
-                    stats.video_targets[0] > 170
-                    and stats.video_targets[1] == ("T1", "T2", "T3", "T4")
-                ),
-                what="a live frame with its four tracked boxes sent to the page",
-                tab=tab,
-            )
-            _wait_for(
-                lambda: "● live: capture" in page.inner_text("body"),
-                what="the live figures in the page",
-                tab=tab,
-            )
-            _wait_for(  # the four signal charts follow the live frames
-                lambda: (
-                    len(page.evaluate(CHARTS_JS)) == 4
-                    and min(row["frames"] for row in page.evaluate(CHARTS_JS)) > 170
-                ),
-                what="the charts with the live frames",
-                tab=tab,
-            )
-            # ... and are the same chart elements from frame to frame (not removed and added
-            # again as the source grows, which left them blank in the page).
-            page.evaluate(SAME_CHARTS_JS)
-            first = controller.cursor
-            _wait_for(lambda: controller.cursor > first + 10, what="ten more frames", tab=tab)
-            assert page.evaluate(SAME_CHARTS_JS), "the charts were rebuilt while tracking live"
-            page.get_by_text("● live: capture").scroll_into_view_if_needed()
-            page.screenshot(path=str(ARTIFACTS / "app-live-tracking.png"))
-            figures = live.figures()
-            assert figures.processed > 10 and figures.captured >= figures.processed
-            page.get_by_role("button", name="Stop").click()
-            _wait_for(lambda: live.state == OFF, what="the stop", tab=tab)
-            assert tab.wait_idle()
-            assert "recorded to" in controller.message
-            page.screenshot(path=str(ARTIFACTS / "app-live-stopped.png"))
-            session = open_session(
-                next((tmp_path / "sessions").rglob("*.mcap"))
-            )  # in the browser's own folder
-            assert session.image_count >= figures.processed + 1  # the frozen frame too
-            recorded = controller.run.frames.recorded_indices
-            assert recorded[0] == frozen and len(recorded) == session.image_count
-        finally:
-            browser.close()
+        page.get_by_role("button", name="Open live source").click()
+        _wait_for(lambda: live.state == PREVIEW, what="the preview", tab=tab)
+        _wait_for(lambda: stats.video_targets[0] > 5, what="the preview frames", tab=tab)
+        page.get_by_role("button", name="Freeze frame").click()
+        _wait_for(lambda: live.state == FROZEN, what="the frozen frame", tab=tab)
+        page.get_by_role("button", name="Load boxes.json").click()
+        _wait_for(lambda: len(controller.run.targets) == 4, what="the four boxes", tab=tab)
+        frozen = controller.cursor
+        page.screenshot(path=str(ARTIFACTS / "app-live-frozen-boxes.png"))
+        page.get_by_role("button", name="Start tracking").click()
+        _wait_for(lambda: live.state == TRACKING, what="tracking", tab=tab)
+        # Past the hover and into the flight, the page gets the tracked boxes.
+        _wait_for(lambda: controller.cursor > 170, timeout=90, what="the flight", tab=tab)
+        _wait_for(
+            lambda: (
+                stats.video_targets[0] > 170 and stats.video_targets[1] == ("T1", "T2", "T3", "T4")
+            ),
+            what="a live frame with its four tracked boxes sent to the page",
+            tab=tab,
+        )
+        _wait_for(
+            lambda: "● live: capture" in page.inner_text("body"),
+            what="the live figures in the page",
+            tab=tab,
+        )
+        _wait_for(  # the four signal charts follow the live frames
+            lambda: (
+                len(page.evaluate(CHARTS_JS)) == 4
+                and min(row["frames"] for row in page.evaluate(CHARTS_JS)) > 170
+            ),
+            what="the charts with the live frames",
+            tab=tab,
+        )
+        # ... and are the same chart elements from frame to frame (not removed and added
+        # again as the source grows, which left them blank in the page).
+        page.evaluate(SAME_CHARTS_JS)
+        first = controller.cursor
+        _wait_for(lambda: controller.cursor > first + 10, what="ten more frames", tab=tab)
+        assert page.evaluate(SAME_CHARTS_JS), "the charts were rebuilt while tracking live"
+        page.get_by_text("● live: capture").scroll_into_view_if_needed()
+        page.screenshot(path=str(ARTIFACTS / "app-live-tracking.png"))
+        figures = live.figures()
+        assert figures.processed > 10 and figures.captured >= figures.processed
+        page.get_by_role("button", name="Stop").click()
+        _wait_for(lambda: live.state == OFF, what="the stop", tab=tab)
+        assert tab.wait_idle()
+        assert "recorded to" in controller.message
+        page.screenshot(path=str(ARTIFACTS / "app-live-stopped.png"))
+        session = open_session(
+            next((tmp_path / "sessions").rglob("*.mcap"))
+        )  # in the browser's own folder
+        assert session.image_count >= figures.processed + 1  # the frozen frame too
+        recorded = controller.run.frames.recorded_indices
+        assert recorded[0] == frozen and len(recorded) == session.image_count

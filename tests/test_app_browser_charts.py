@@ -11,17 +11,14 @@ from __future__ import annotations
 
 import math
 import time
-from pathlib import Path
 
 import pytest
 
 from tests.test_app_browser import (
-    CHROMIUM,
-    CHROMIUM_FLAGS,
     SAME_CHARTS_JS,
-    VIEWPORT,
     _wait_for,
     studio,  # noqa: F401 (the fixture)
+    studio_page,
 )
 
 pytestmark = pytest.mark.browser
@@ -53,119 +50,88 @@ WATCH_WIDTHS_JS = """() => {
 """Records, every frame the page draws, the narrowest chart (as a fraction of its panel)."""
 
 
-def _browser(playwright, profile: Path):
-    return playwright.chromium.launch_persistent_context(
-        str(profile),
-        executable_path=str(CHROMIUM),
-        headless=True,
-        args=CHROMIUM_FLAGS,
-        viewport=VIEWPORT,
-    )
+def load_demo_boxes(page, tab) -> None:
+    """Press Load boxes.json and wait for the demo's four targets."""
+    page.get_by_role("button", name="Load boxes.json").click()
+    _wait_for(lambda: len(tab.controller.run.targets) == 4, what="the boxes", tab=tab)
 
 
 def _charts(page) -> dict[str, dict]:
     return {row["title"]: row for row in page.evaluate(CHART_STATE_JS)}
 
 
-def _open(studio, page):  # noqa: F811
-    page.goto(studio.url)
-    _wait_for(lambda: len(studio.tabs) == 1, what="the tab to connect")
-    tab = next(iter(studio.tabs.values()))
-    assert tab.wait_idle()
-    return tab
-
-
 def test_charts_are_made_once_as_wide_as_their_panel_and_readable(studio, tmp_path) -> None:  # noqa: F811
-    from playwright.sync_api import sync_playwright
-
     from app.plots import CHART_TITLES, decade_label
 
-    with sync_playwright() as playwright:
-        browser = _browser(playwright, tmp_path / "profile")
-        try:
-            page = browser.new_page()
-            tab = _open(studio, page)
-            controller = tab.controller
-            _wait_for(lambda: sorted(_charts(page)) == sorted(CHART_TITLES), what="the charts")
-            page.evaluate(SAME_CHARTS_JS)  # the chart elements before any target
-            page.evaluate(WATCH_WIDTHS_JS)
-            page.get_by_role("button", name="Load boxes.json").click()
-            _wait_for(lambda: len(controller.run.targets) == 4, what="the boxes", tab=tab)
-            theta = CHART_TITLES[2]
-            _wait_for(  # theta is 0 on the first frame: a flat signal
-                lambda: (
-                    _charts(page)[theta]["labels"][1] == "T1 θref"
-                    and _charts(page)[theta]["y_min"] <= -1.0
-                ),
-                what="the flat theta chart",
-                tab=tab,
-            )
-            flat = _charts(page)[theta]
-            assert len(set(flat["y_labels"])) == len(flat["y_labels"]) >= 3, flat["y_labels"]
+    with studio_page(studio, tmp_path / "profile") as (page, tab):
+        controller = tab.controller
+        _wait_for(lambda: sorted(_charts(page)) == sorted(CHART_TITLES), what="the charts")
+        page.evaluate(SAME_CHARTS_JS)  # the chart elements before any target
+        page.evaluate(WATCH_WIDTHS_JS)
+        load_demo_boxes(page, tab)
+        theta = CHART_TITLES[2]
+        _wait_for(  # theta is 0 on the first frame: a flat signal
+            lambda: (
+                _charts(page)[theta]["labels"][1] == "T1 θref"
+                and _charts(page)[theta]["y_min"] <= -1.0
+            ),
+            what="the flat theta chart",
+            tab=tab,
+        )
+        flat = _charts(page)[theta]
+        assert len(set(flat["y_labels"])) == len(flat["y_labels"]) >= 3, flat["y_labels"]
 
-            # Play, step over two frames (not played: no in-app rate), play on.
-            tab.panels.playback.unlimited.value = True
-            page.get_by_role("button", name="Play").click()
-            _wait_for(lambda: controller.cursor >= 8, what="frames played", tab=tab)
-            page.get_by_role("button", name="Pause").click()
+        # Play, step over two frames (not played: no in-app rate), play on.
+        tab.panels.playback.unlimited.value = True
+        page.get_by_role("button", name="Play").click()
+        _wait_for(lambda: controller.cursor >= 8, what="frames played", tab=tab)
+        page.get_by_role("button", name="Pause").click()
+        assert tab.wait_idle()
+        for _ in range(2):
+            page.get_by_role("button", name="Step forward").click()
             assert tab.wait_idle()
-            for _ in range(2):
-                page.get_by_role("button", name="Step forward").click()
-                assert tab.wait_idle()
-            page.get_by_role("button", name="Play").click()
-            _wait_for(lambda: controller.cursor >= 20, what="more frames", tab=tab)
-            page.get_by_role("button", name="Pause").click()
-            assert tab.wait_idle()
-            last = controller.cursor
-            _wait_for(
-                lambda: all(row["frames"] == last + 3 for row in _charts(page).values()),
-                what="the charts with every frame",
-                tab=tab,
-            )
-            time.sleep(0.5)  # a few more frames drawn by the page
-            charts = _charts(page)
-            assert page.evaluate(SAME_CHARTS_JS), "the charts were made again"
-            narrowest = page.evaluate("() => window.__narrowest")
-            assert narrowest > 0.98, f"a chart was drawn at {narrowest:.0%} of its panel"
-            for row in charts.values():
-                assert abs(row["width"] - row["panel"]) <= 2.0, row
+        page.get_by_role("button", name="Play").click()
+        _wait_for(lambda: controller.cursor >= 20, what="more frames", tab=tab)
+        page.get_by_role("button", name="Pause").click()
+        assert tab.wait_idle()
+        last = controller.cursor
+        _wait_for(
+            lambda: all(row["frames"] == last + 3 for row in _charts(page).values()),
+            what="the charts with every frame",
+            tab=tab,
+        )
+        time.sleep(0.5)  # a few more frames drawn by the page
+        charts = _charts(page)
+        assert page.evaluate(SAME_CHARTS_JS), "the charts were made again"
+        narrowest = page.evaluate("() => window.__narrowest")
+        assert narrowest > 0.98, f"a chart was drawn at {narrowest:.0%} of its panel"
+        for row in charts.values():
+            assert abs(row["width"] - row["panel"]) <= 2.0, row
 
-            eta = charts[CHART_TITLES[1]]  # one labelled line per decade
-            exponents = [math.log10(split) for split in eta["y_splits"]]
-            assert len(exponents) >= 2 and all(abs(e - round(e)) < 1e-9 for e in exponents)
-            assert eta["y_labels"] == [decade_label(round(e)) for e in exponents], eta
+        eta = charts[CHART_TITLES[1]]  # one labelled line per decade
+        exponents = [math.log10(split) for split in eta["y_splits"]]
+        assert len(exponents) >= 2 and all(abs(e - round(e)) < 1e-9 for e in exponents)
+        assert eta["y_labels"] == [decade_label(round(e)) for e in exponents], eta
 
-            speed = charts[CHART_TITLES[3]]
-            in_app = speed["labels"].index("in-app fps")
-            assert speed["gaps"][in_app] >= 1, speed  # the stepped frames: a gap, not a line
-            page.screenshot(path=str(tmp_path / "charts.png"))
-        finally:
-            browser.close()
+        speed = charts[CHART_TITLES[3]]
+        in_app = speed["labels"].index("in-app fps")
+        assert speed["gaps"][in_app] >= 1, speed  # the stepped frames: a gap, not a line
+        page.screenshot(path=str(tmp_path / "charts.png"))
 
 
 def test_playing_to_the_end_stops_at_the_last_frame_in_chromium(studio, tmp_path) -> None:  # noqa: F811
-    from playwright.sync_api import sync_playwright
 
-    with sync_playwright() as playwright:
-        browser = _browser(playwright, tmp_path / "profile")
-        try:
-            page = browser.new_page()
-            tab = _open(studio, page)
-            controller = tab.controller
-            last = controller.run.frame_count - 1
-            page.get_by_role("button", name="Load boxes.json").click()
-            _wait_for(lambda: len(controller.run.targets) == 4, what="the boxes", tab=tab)
-            tab.panels.playback.unlimited.value = True
-            page.get_by_role("button", name="Play").click()
-            _wait_for(lambda: controller.cursor == last, what="the last frame", tab=tab)
-            play, pause = (
-                page.get_by_role("button", name=n, exact=True) for n in ("Play", "Pause")
-            )
-            _wait_for(lambda: play.count() == 1 and pause.count() == 0, what="Play in the page")
-            time.sleep(1.0)  # nothing moves after the end
-            assert controller.cursor == last and not controller.playing and tab.wait_idle()
-            assert play.count() == 1 and pause.count() == 0
-            assert tab.panels.playback.frame.value == last + 1
-            assert "error" not in controller.message.lower(), controller.message
-        finally:
-            browser.close()
+    with studio_page(studio, tmp_path / "profile") as (page, tab):
+        controller = tab.controller
+        last = controller.run.frame_count - 1
+        load_demo_boxes(page, tab)
+        tab.panels.playback.unlimited.value = True
+        page.get_by_role("button", name="Play").click()
+        _wait_for(lambda: controller.cursor == last, what="the last frame", tab=tab)
+        play, pause = (page.get_by_role("button", name=n, exact=True) for n in ("Play", "Pause"))
+        _wait_for(lambda: play.count() == 1 and pause.count() == 0, what="Play in the page")
+        time.sleep(1.0)  # nothing moves after the end
+        assert controller.cursor == last and not controller.playing and tab.wait_idle()
+        assert play.count() == 1 and pause.count() == 0
+        assert tab.panels.playback.frame.value == last + 1
+        assert "error" not in controller.message.lower(), controller.message

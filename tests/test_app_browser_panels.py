@@ -13,8 +13,9 @@ from tests.test_app_browser import (
     DEMO,
     _wait_for,
     studio,  # noqa: F401 (the fixture)
+    studio_page,
 )
-from tests.test_app_browser_charts import _browser, _open
+from tests.test_app_browser_charts import load_demo_boxes
 
 pytestmark = pytest.mark.browser
 
@@ -39,48 +40,31 @@ def _targets_in_legends(page) -> set[str]:
 
 
 def test_the_targets_table_header_reads_on_one_line(studio, tmp_path) -> None:  # noqa: F811
-    from playwright.sync_api import sync_playwright
-
-    with sync_playwright() as playwright:
-        browser = _browser(playwright, tmp_path / "profile")
-        try:
-            page = browser.new_page()
-            tab = _open(studio, page)
-            page.get_by_role("button", name="Load boxes.json").click()
-            _wait_for(lambda: len(tab.controller.run.targets) == 4, what="the boxes", tab=tab)
-            _wait_for(lambda: len(page.evaluate(TABLE_HEADER_JS)) > 0, what="the table")
-            page.locator("table").first.scroll_into_view_if_needed()
-            page.screenshot(path=str(tmp_path / "targets-table.png"))
-            header = page.evaluate(TABLE_HEADER_JS)
-            assert all(cell["lines"] == 1 for cell in header), header
-        finally:
-            browser.close()
+    with studio_page(studio, tmp_path / "profile") as (page, tab):
+        load_demo_boxes(page, tab)
+        _wait_for(lambda: len(page.evaluate(TABLE_HEADER_JS)) > 0, what="the table")
+        page.locator("table").first.scroll_into_view_if_needed()
+        page.screenshot(path=str(tmp_path / "targets-table.png"))
+        header = page.evaluate(TABLE_HEADER_JS)
+        assert all(cell["lines"] == 1 for cell in header), header
 
 
 def test_chart_legends_list_only_the_targets_that_exist(studio, tmp_path) -> None:  # noqa: F811
-    from playwright.sync_api import sync_playwright
-
     from app.plots import CHART_TITLES
 
-    with sync_playwright() as playwright:
-        browser = _browser(playwright, tmp_path / "profile")
-        try:
-            page = browser.new_page()
-            tab = _open(studio, page)
-            _wait_for(lambda: len(page.evaluate(LEGENDS_JS)) == len(CHART_TITLES), what="charts")
-            time.sleep(0.5)  # the page has drawn what the server sent first
-            assert _targets_in_legends(page) == set()
-            assert any("φ" in legend for legend in page.evaluate(LEGENDS_JS))  # the rest stays
-            boxes = json.loads((DEMO / "boxes.json").read_text())
-            for count, landmark_id in enumerate("ABCD", start=1):
-                tab.panels.targets.box.value = ", ".join(map(str, boxes[landmark_id]))
-                page.get_by_role("button", name="Apply typed box").click()
-                _wait_for(lambda n=count: len(tab.controller.run.targets) == n, tab=tab)
-                if count == 1:
-                    _wait_for(lambda: _targets_in_legends(page) == {"T1"}, what="T1 only")
-            everyone = {"T1", "T2", "T3", "T4"}
-            _wait_for(lambda: _targets_in_legends(page) == everyone, what="four in the legends")
-            theta = page.evaluate(LEGENDS_JS)[CHART_TITLES.index("θ_ref (dots) and θ")]
-            assert "T4 θref" in theta and "T4 θ" in theta
-        finally:
-            browser.close()
+    with studio_page(studio, tmp_path / "profile") as (page, tab):
+        _wait_for(lambda: len(page.evaluate(LEGENDS_JS)) == len(CHART_TITLES), what="charts")
+        time.sleep(0.5)  # the page has drawn what the server sent first
+        assert _targets_in_legends(page) == set()
+        assert any("φ" in legend for legend in page.evaluate(LEGENDS_JS))  # the rest stays
+        boxes = json.loads((DEMO / "boxes.json").read_text())
+        for count, landmark_id in enumerate("ABCD", start=1):
+            tab.panels.targets.box.value = ", ".join(map(str, boxes[landmark_id]))
+            page.get_by_role("button", name="Apply typed box").click()
+            _wait_for(lambda n=count: len(tab.controller.run.targets) == n, tab=tab)
+            if count == 1:
+                _wait_for(lambda: _targets_in_legends(page) == {"T1"}, what="T1 only")
+        everyone = {"T1", "T2", "T3", "T4"}
+        _wait_for(lambda: _targets_in_legends(page) == everyone, what="four in the legends")
+        theta = page.evaluate(LEGENDS_JS)[CHART_TITLES.index("θ_ref (dots) and θ")]
+        assert "T4 θref" in theta and "T4 θ" in theta
