@@ -113,7 +113,7 @@ def frame_view(
     for target in run.targets.values():
         colour = target_colour(target.number - 1)
         colours.append(colour)
-        signals[target.id] = {name: values.copy() for name, values in target.signals.items()}
+        signals[target.id] = target.signals  # new arrays
         result = with_maps(target, frame_index, recorded)
         if result is None:
             continue

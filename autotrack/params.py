@@ -142,7 +142,7 @@ class TrackerParams:
     """With the long-term memory (without it the prior has nothing to weigh), weigh each
     distinct peak also by a constant-velocity prior:
     a Gaussian around the last confident frame's motion with this standard deviation, as a
-    fraction of the target's short side (memory.MotionPrior); 0 = off. 0.5: the separation at
+    fraction of the target's short side (motion.MotionPrior); 0 = off. 0.5: the separation at
     which two peaks count as two objects, so a peak one such step further off the target's path
     needs 1.65x (e^0.5) the appearance evidence of the other."""
     num_aspects: int = 0

@@ -44,16 +44,15 @@ class TrackedTarget:
     results: ResultHistory = field(default_factory=ResultHistory)
     """Results by 0-based frame index (the box's frame holds the init result), as columns; the
     recent map window's results kept whole."""
-    signals: dict[str, np.ndarray] = field(default_factory=dict)
-    """Name in SIGNAL_NAMES -> float64 array over all frames, NaN where nothing is known."""
+    frame_count: int = 0
+    """Frames of the sequence so far (the length of the `signals` arrays)."""
 
     @classmethod
     def new(
         cls, target_id: str, number: int, landmark_id: str | None, frames: int
     ) -> TrackedTarget:
-        """A target with no results yet and NaN signals over `frames` frames."""
-        signals = {name: np.full(frames, np.nan) for name in SIGNAL_NAMES}
-        return cls(id=target_id, number=number, landmark_id=landmark_id, signals=signals)
+        """A target with no results yet, on a sequence of `frames` frames."""
+        return cls(id=target_id, number=number, landmark_id=landmark_id, frame_count=frames)
 
     @property
     def last_frame(self) -> int:
@@ -66,31 +65,31 @@ class TrackedTarget:
         has them."""
         return self.results.maps_from
 
-    def keep(self, result: TrackResult, map_window: int) -> None:
-        """`result` as the target's result on its frame, with its signals in the arrays; the
-        maps of the results `map_window` or more frames before it are dropped (0: its own too).
-        """
-        self.results.put(result, map_window)
+    @property
+    def signals(self) -> dict[str, np.ndarray]:
+        """Name in SIGNAL_NAMES -> a new float64 array over all frames, NaN where the target
+        has no result (for plots; made from the results' columns)."""
+        results = self.results
+        arrays = {}
         for name in SIGNAL_NAMES:
-            self.signals[name][result.frame_index] = signal_value(result, name)
+            values = np.full(self.frame_count, np.nan)
+            column = results.aberrant if name == "aberrant" else results.column(name)
+            values[results.frames] = column
+            arrays[name] = values
+        return arrays
+
+    def keep(self, result: TrackResult, map_window: int) -> None:
+        """`result` as the target's result on its frame; the maps of the results `map_window`
+        or more frames before it are dropped (0: its own too)."""
+        self.results.put(result, map_window)
 
     def truncate_after(self, frame_index: int) -> list[int]:
-        """Drop the results and signals after `frame_index`; the frames dropped, in order."""
-        for values in self.signals.values():
-            values[frame_index + 1 :] = np.nan
+        """Drop the results after `frame_index`; the frames dropped, in order."""
         return self.results.truncate_after(frame_index)
 
     def grow(self, frame_count: int) -> None:
-        """Extend the signal arrays to `frame_count` frames (NaN for the new ones)."""
-        for name, values in self.signals.items():
-            self.signals[name] = grown(values, frame_count)
-
-
-def signal_value(result: TrackResult, name: str) -> float:
-    """The number of `result` plotted as signal `name` (one of SIGNAL_NAMES)."""
-    if name == "aberrant":
-        return 1.0 if result.aberrant else 0.0
-    return float(getattr(result, name))
+        """The sequence now has `frame_count` frames (a live source grows)."""
+        self.frame_count = frame_count
 
 
 @dataclass(frozen=True)
