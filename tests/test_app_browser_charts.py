@@ -67,6 +67,12 @@ def test_charts_are_made_once_as_wide_as_their_panel_and_readable(studio, tmp_pa
         controller = tab.controller
         _wait_for(lambda: sorted(_charts(page)) == sorted(CHART_TITLES), what="the charts")
         page.evaluate(SAME_CHARTS_JS)  # the chart elements before any target
+        # A chart is mounted 0 px wide and widened when viser's size hook first measures its
+        # panel (a frame or more later on a loaded machine): watch from the first full width.
+        _wait_for(
+            lambda: all(row["width"] >= 0.98 * row["panel"] > 0 for row in _charts(page).values()),
+            what="the charts at their panel's width",
+        )
         page.evaluate(WATCH_WIDTHS_JS)
         load_demo_boxes(page, tab)
         theta = CHART_TITLES[2]
