@@ -14,7 +14,6 @@ from __future__ import annotations
 import argparse
 import json
 import os
-import time
 from concurrent.futures import ProcessPoolExecutor, as_completed
 from dataclasses import replace
 from multiprocessing import get_context
@@ -22,12 +21,13 @@ from pathlib import Path
 
 import numpy as np
 
-from autotrack.evaluation.benchmark import SINGLE_THREAD_ENVIRONMENT, run_task, single_thread
+from autotrack.evaluation.benchmark import run_task
 from autotrack.evaluation.datasets import load_sequences
 from autotrack.evaluation.metrics import score_sequence
+from autotrack.evaluation.peers import AutoTrackPeer
+from autotrack.evaluation.runs import SINGLE_THREAD_ENVIRONMENT, track_timed
 from autotrack.io.otb_boxes import read_boxes, write_boxes
 from autotrack.params import PRESETS
-from autotrack.tracker.tracker import AutoTrack
 
 REPO = Path(__file__).resolve().parents[1]
 SHARED = REPO / ".." / "shared" / "data"
@@ -136,17 +136,8 @@ def slug(overrides: dict) -> str:
 def track(overrides: dict, sequence) -> tuple[np.ndarray, np.ndarray]:
     """Boxes (0-based x, y, w, h) and per-frame tracking seconds of one variant on one sequence."""
     params = replace(PRESETS[FAITHFUL], **overrides)
-    boxes = np.empty((len(sequence), 4))
-    times = np.empty(len(sequence))
-    with sequence.frames() as frames, single_thread():
-        tracker = AutoTrack(params)
-        for index in range(len(sequence)):
-            frame = frames.read(index)
-            start = time.perf_counter()
-            result = tracker.update(frame) if index else tracker.init(frame, sequence.init_box)
-            times[index] = time.perf_counter() - start
-            boxes[index] = result.box
-    return boxes, times
+    result = track_timed(slug(overrides), lambda: AutoTrackPeer(params), sequence)
+    return result.boxes, result.times
 
 
 def _task(kind: str, overrides: dict, sequence):

@@ -14,19 +14,16 @@ from autotrack.cli import main
 from autotrack.errors import InputError
 from autotrack.evaluation import benchmark
 from autotrack.evaluation.benchmark import (
-    TaskResult,
     format_table,
-    load_result,
-    result_paths,
     run_benchmark,
     run_task,
-    single_thread,
     summarize_run,
     summary_json,
 )
 from autotrack.evaluation.datasets import Sequence, load_sequences
 from autotrack.evaluation.metrics import score_sequence
 from autotrack.evaluation.peers import TRACKER_NAMES, OpenCVPeer, make_tracker
+from autotrack.evaluation.runs import TaskResult, load_result, result_paths, single_thread
 from autotrack.io.otb_boxes import read_boxes
 from tests.conftest import COLOUR_TABLE, SEQUENCES
 

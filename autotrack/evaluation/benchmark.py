@@ -1,37 +1,23 @@
-"""One-pass evaluation runner: every tracker on every sequence, resumable, in parallel.
+"""One-pass evaluation: every tracker on every sequence, resumable, in parallel; its scores,
+tables and plots.
 
 The unit of work is `run_task(tracker_name, sequence, colour_table_path) -> TaskResult`: a pure,
 picklable function of one (tracker, sequence) pair. `run_benchmark` maps it over the pairs not
 already saved, inline (jobs=1), in a local process pool (jobs > 1) or on any
 `concurrent.futures.Executor` passed in (a distributed engine's executor can take the pool's
-place), and saves each result as it arrives:
-
-- ``DIR/<tracker>/<sequence>.txt``: one x,y,w,h row per frame, 1-based (benchmark convention),
-  the file other toolkits read;
-- ``DIR/<tracker>/<sequence>.time.json``: per-frame tracking times and the tracker's colour
-  feature. A pair is resumed (not rerun) when both files exist, the box file has one row per
-  frame and the colour feature matches.
-
-Timing is the wall time of the tracker's init/update calls only (not frame decoding), with
-OpenCV, numba and BLAS limited to one thread per process.
+place), and saves each result as it arrives (`autotrack.evaluation.runs`: the files, resuming,
+and single-thread timing of the tracker calls only).
 """
 
 from __future__ import annotations
 
-import json
 import math
-import os
-import time
-from collections.abc import Iterator, Mapping, Sequence
-from concurrent.futures import Executor, Future, ProcessPoolExecutor, as_completed
-from contextlib import contextmanager, nullcontext
+from collections.abc import Mapping, Sequence
+from concurrent.futures import Executor
 from dataclasses import dataclass, field
-from multiprocessing import get_context
 from pathlib import Path
 
-import cv2
 import numpy as np
-from tqdm import tqdm
 
 from autotrack.errors import InputError
 from autotrack.evaluation.datasets import Sequence as BenchmarkSequence
@@ -46,75 +32,10 @@ from autotrack.evaluation.metrics import (
     summarize_by_dataset,
 )
 from autotrack.evaluation.peers import TRACKER_NAMES, colour_feature_of, make_tracker
-from autotrack.io import otb_boxes
-from autotrack.io.atomic import write_text
+from autotrack.evaluation.runs import TaskResult, run_resumable, track_timed
 
 DEFAULT_OUT_DIR = Path("results")
 """Where results go when no --out is given (relative to the current directory)."""
-
-SINGLE_THREAD_ENVIRONMENT: dict[str, str] = {
-    "OMP_NUM_THREADS": "1",
-    "OPENBLAS_NUM_THREADS": "1",
-    "MKL_NUM_THREADS": "1",
-    "NUMBA_NUM_THREADS": "1",
-}
-"""Environment of worker processes: BLAS, OpenMP and numba read it when they load."""
-
-
-@dataclass(frozen=True, eq=False)
-class TaskResult:
-    """Boxes and per-frame tracking times of one tracker on one sequence."""
-
-    tracker: str
-    """Tracker name."""
-    sequence: str
-    """Sequence name."""
-    boxes: np.ndarray
-    """(N, 4) float64 boxes x, y, w, h, 0-based pixels."""
-    times: np.ndarray
-    """(N,) seconds spent in the tracker's init (frame 0) and update calls."""
-
-    @property
-    def frames(self) -> int:
-        """Number of frames tracked."""
-        return len(self.boxes)
-
-    @property
-    def seconds(self) -> float:
-        """Total tracking time in seconds."""
-        return float(np.sum(self.times))
-
-    @property
-    def fps(self) -> float:
-        """Frames per second of tracking time."""
-        return self.frames / self.seconds if self.seconds > 0 else math.inf
-
-
-@contextmanager
-def single_thread() -> Iterator[None]:
-    """Limit OpenCV, numba and (when threadpoolctl is installed) BLAS to one thread, then restore."""
-    previous_cv_threads = cv2.getNumThreads()
-    cv2.setNumThreads(1)
-    try:
-        import numba
-
-        previous_numba_threads = numba.get_num_threads()
-        numba.set_num_threads(1)
-    except ImportError:
-        numba, previous_numba_threads = None, 0
-    try:
-        from threadpoolctl import threadpool_limits
-
-        blas_limits = threadpool_limits(limits=1)
-    except ImportError:
-        blas_limits = nullcontext()
-    try:
-        with blas_limits:
-            yield
-    finally:
-        cv2.setNumThreads(previous_cv_threads)
-        if numba is not None:
-            numba.set_num_threads(previous_numba_threads)
 
 
 def run_task(
@@ -123,75 +44,9 @@ def run_task(
     colour_table_path: str | Path | None = None,
 ) -> TaskResult:
     """Track one sequence from its first ground-truth box; time only the tracker calls."""
-    count = len(sequence)
-    boxes = np.empty((count, 4), dtype=np.float64)
-    times = np.empty(count, dtype=np.float64)
-    init_box = sequence.init_box
-    with sequence.frames() as frames, single_thread():
-        tracker = make_tracker(tracker_name, colour_table_path)
-        for index in range(count):
-            frame = frames.read(index)
-            start = time.perf_counter()
-            box = tracker.init(frame, init_box) if index == 0 else tracker.update(frame)
-            times[index] = time.perf_counter() - start
-            boxes[index] = box
-    return TaskResult(tracker_name, sequence.name, boxes, times)
-
-
-def result_paths(out_dir: Path, tracker: str, sequence: str) -> tuple[Path, Path]:
-    """The box file and the timing file of one (tracker, sequence) pair."""
-    folder = Path(out_dir) / tracker
-    return folder / f"{sequence}.txt", folder / f"{sequence}.time.json"
-
-
-def save_result(out_dir: Path, result: TaskResult, colour_feature: str | None) -> None:
-    """Write the box file, then the timing file (its presence marks the pair as done)."""
-    boxes_path, timing_path = result_paths(out_dir, result.tracker, result.sequence)
-    boxes_path.parent.mkdir(parents=True, exist_ok=True)
-    otb_boxes.write_boxes(boxes_path, result.boxes)  # each file whole or not at all
-    timing = {
-        "tracker": result.tracker,
-        "sequence": result.sequence,
-        "frames": result.frames,
-        "colour_feature": colour_feature,
-        "seconds": result.seconds,
-        "times": [float(t) for t in result.times],
-    }
-    write_text(timing_path, json.dumps(timing) + "\n")
-
-
-def load_result(
-    out_dir: Path, tracker: str, sequence: BenchmarkSequence, colour_feature: str | None
-) -> TaskResult | None:
-    """A saved result for the pair, or None when it is missing, incomplete or from another
-    colour feature (then the pair is rerun)."""
-    boxes_path, timing_path = result_paths(out_dir, tracker, sequence.name)
-    if not (boxes_path.is_file() and timing_path.is_file()):
-        return None
-    try:
-        timing = json.loads(timing_path.read_text())
-        boxes = otb_boxes.read_boxes(boxes_path)
-        times = np.asarray(timing["times"], dtype=np.float64)
-    except (InputError, ValueError, KeyError, TypeError):
-        return None
-    complete = len(boxes) == len(sequence) == len(times) == timing.get("frames")
-    if not complete or timing.get("colour_feature") != colour_feature:
-        return None
-    return TaskResult(tracker, sequence.name, boxes, times)
-
-
-@contextmanager
-def _environment(variables: Mapping[str, str]) -> Iterator[None]:
-    previous = {name: os.environ.get(name) for name in variables}
-    os.environ.update(variables)
-    try:
-        yield
-    finally:
-        for name, value in previous.items():
-            if value is None:
-                os.environ.pop(name, None)
-            else:
-                os.environ[name] = value
+    return track_timed(
+        tracker_name, lambda: make_tracker(tracker_name, colour_table_path), sequence
+    )
 
 
 @dataclass(frozen=True, eq=False)
@@ -250,71 +105,25 @@ def run_benchmark(
         raise InputError("sequence names must be unique in a benchmark run (they name the results)")
     out_dir = Path(out_dir)
     colour_features = {name: colour_feature_of(name, colour_table) for name in tracker_names}
-    results: dict[tuple[str, str], TaskResult] = {}
-    pending: list[tuple[str, BenchmarkSequence]] = []
-    for name in tracker_names:
-        for sequence in sequences:
-            saved = load_result(out_dir, name, sequence, colour_features[name])
-            if saved is None:
-                pending.append((name, sequence))
-            else:
-                results[(name, sequence.name)] = saved
-    resumed = len(results)
-    # Longest sequences first so parallel workers finish together.
-    pending.sort(key=lambda task: -len(task[1]))
-
-    with tqdm(total=len(pending), desc="bench", unit="run", disable=not progress) as bar:
-        for result in _execute(pending, colour_table, jobs, executor):
-            save_result(out_dir, result, colour_features[result.tracker])
-            results[(result.tracker, result.sequence)] = result
-            bar.set_postfix_str(f"{result.tracker} {result.sequence} {result.fps:.1f} fps")
-            bar.update()
+    runs = run_resumable(
+        tracker_names,
+        sequences,
+        out_dir,
+        colour_features,
+        lambda name, sequence: (run_task, (name, sequence, colour_table)),
+        jobs=jobs,
+        executor=executor,
+        progress=progress,
+        description="bench",
+    )
     return BenchmarkRun(
         trackers=tracker_names,
         sequences=tuple(sequences),
-        results=results,
+        results=runs.results,
         colour_features=colour_features,
-        computed=len(pending),
-        resumed=resumed,
+        computed=runs.computed,
+        resumed=runs.resumed,
     )
-
-
-def _execute(
-    tasks: list[tuple[str, BenchmarkSequence]],
-    colour_table: str | Path | None,
-    jobs: int,
-    executor: Executor | None,
-) -> Iterator[TaskResult]:
-    if not tasks:
-        return
-    if executor is None and jobs == 1:
-        for tracker, sequence in tasks:
-            yield run_task(tracker, sequence, colour_table)
-        return
-    if executor is not None:
-        yield from _map_unordered(executor, tasks, colour_table)
-        return
-    with (
-        _environment(SINGLE_THREAD_ENVIRONMENT),
-        ProcessPoolExecutor(
-            max_workers=min(jobs, len(tasks)), mp_context=get_context("spawn")
-        ) as pool,
-    ):
-        yield from _map_unordered(pool, tasks, colour_table)
-
-
-def _map_unordered(
-    executor: Executor, tasks: list[tuple[str, BenchmarkSequence]], colour_table: str | Path | None
-) -> Iterator[TaskResult]:
-    futures: list[Future[TaskResult]] = [
-        executor.submit(run_task, tracker, sequence, colour_table) for tracker, sequence in tasks
-    ]
-    try:
-        for future in as_completed(futures):
-            yield future.result()
-    finally:
-        for future in futures:
-            future.cancel()
 
 
 @dataclass(frozen=True, eq=False)

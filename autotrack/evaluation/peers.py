@@ -18,7 +18,7 @@ import cv2
 import numpy as np
 
 from autotrack.errors import InputError
-from autotrack.params import PRESETS, preset
+from autotrack.params import PRESETS, TrackerParams, preset
 
 Box = tuple[float, float, float, float]
 
@@ -46,13 +46,13 @@ class BoxTracker(Protocol):
 
 
 class AutoTrackPeer:
-    """AutoTrack (or one of its ablation presets) returning boxes only."""
+    """AutoTrack with any parameters (a preset, a sweep's combination) returning boxes only."""
 
-    def __init__(self, preset_name: str, colour_table: str | Path | None = None) -> None:
+    def __init__(self, params: TrackerParams) -> None:
         from autotrack.tracker.tracker import AutoTrack
 
-        self.params = preset(preset_name, colour_table)
-        self._tracker = AutoTrack(self.params)
+        self.params = params
+        self._tracker = AutoTrack(params)
 
     def init(self, frame_rgb: np.ndarray, box: Sequence[float]) -> Box:
         return tuple(self._tracker.init(frame_rgb, box).box)
@@ -100,7 +100,7 @@ def make_tracker(name: str, colour_table: str | Path | None = None) -> BoxTracke
     table) applies to the AutoTrack presets only."""
     key = name.strip().lower()
     if key in PRESETS:
-        return AutoTrackPeer(key, colour_table)
+        return AutoTrackPeer(preset(key, colour_table))
     if key in OPENCV_TRACKERS:
         return OpenCVPeer(key)
     raise InputError(f"unknown tracker {name!r}; choose from {', '.join(TRACKER_NAMES)}")

@@ -9,7 +9,7 @@ benchmark's `run_task`, so the same executors run it (inline, a local process po
 
 - ``DIR/runs/<label>/params.json``: the full parameters of the combination;
 - ``DIR/runs/<label>/<sequence>.txt`` and ``.time.json``: boxes and tracking times, the
-  benchmark's result files (`autotrack.evaluation.benchmark.save_result`), so an interrupted sweep resumes
+  benchmark's result files (`autotrack.evaluation.runs`), so an interrupted sweep resumes
   where it stopped;
 - ``DIR/sweep.csv``, ``DIR/sweep.md``, ``DIR/sweep.json``: P@20, AUC and fps per combination;
 - ``DIR/sweep.png``: the same as bars, one panel per figure.
@@ -22,30 +22,19 @@ import itertools
 import json
 import math
 import re
-import time
 import typing
-from collections.abc import Iterator, Mapping, Sequence
-from concurrent.futures import Executor, Future, ProcessPoolExecutor, as_completed
+from collections.abc import Mapping, Sequence
+from concurrent.futures import Executor
 from dataclasses import dataclass
-from multiprocessing import get_context
 from pathlib import Path
 
 import numpy as np
-from tqdm import tqdm
 
 from autotrack.errors import InputError
-from autotrack.evaluation.benchmark import (
-    SINGLE_THREAD_ENVIRONMENT,
-    BenchmarkRun,
-    TaskResult,
-    TrackerSummary,
-    _environment,
-    load_result,
-    save_result,
-    single_thread,
-    summarize_run,
-)
+from autotrack.evaluation.benchmark import BenchmarkRun, TrackerSummary, summarize_run
 from autotrack.evaluation.datasets import Sequence as BenchmarkSequence
+from autotrack.evaluation.peers import AutoTrackPeer
+from autotrack.evaluation.runs import TaskResult, run_resumable, track_timed
 from autotrack.io.atomic import write_figure, write_text
 from autotrack.io.csv_table import write_csv as write_table
 from autotrack.params import TrackerParams
@@ -168,20 +157,7 @@ def grid_combinations(base: TrackerParams, axes: Sequence[GridAxis]) -> tuple[Co
 def run_combination(label: str, params: TrackerParams, sequence: BenchmarkSequence) -> TaskResult:
     """Track one sequence with one combination's parameters, timing only the tracker calls
     (the benchmark's `run_task` for a parameter set instead of a tracker name)."""
-    from autotrack.tracker.tracker import AutoTrack
-
-    count = len(sequence)
-    boxes = np.empty((count, 4), dtype=np.float64)
-    times = np.empty(count, dtype=np.float64)
-    with sequence.frames() as frames, single_thread():
-        tracker = AutoTrack(params)
-        for index in range(count):
-            frame = frames.read(index)
-            start = time.perf_counter()
-            result = tracker.init(frame, sequence.init_box) if index == 0 else tracker.update(frame)
-            times[index] = time.perf_counter() - start
-            boxes[index] = result.box
-    return TaskResult(label, sequence.name, boxes, times)
+    return track_timed(label, lambda: AutoTrackPeer(params), sequence)
 
 
 def colour_feature_label(params: TrackerParams) -> str:
@@ -244,69 +220,27 @@ def run_sweep(
     for combination in combinations:
         _claim_folder(runs_dir, combination)
     colour_features = {c.label: colour_feature_label(c.params) for c in combinations}
-    results: dict[tuple[str, str], TaskResult] = {}
-    pending: list[tuple[Combination, BenchmarkSequence]] = []
-    for combination in combinations:
-        for sequence in sequences:
-            label = combination.label
-            saved = load_result(runs_dir, label, sequence, colour_features[label])
-            if saved is None:
-                pending.append((combination, sequence))
-            else:
-                results[(label, sequence.name)] = saved
-    resumed = len(results)
-    pending.sort(key=lambda task: -len(task[1]))  # longest first: workers finish together
-    with tqdm(total=len(pending), desc="sweep", unit="run", disable=not progress) as bar:
-        for result in _execute(pending, jobs, executor):
-            save_result(runs_dir, result, colour_features[result.tracker])
-            results[(result.tracker, result.sequence)] = result
-            bar.set_postfix_str(f"{result.tracker} {result.sequence}")
-            bar.update()
+    params = {combination.label: combination.params for combination in combinations}
+    runs = run_resumable(
+        [combination.label for combination in combinations],
+        sequences,
+        runs_dir,
+        colour_features,
+        lambda label, sequence: (run_combination, (label, params[label], sequence)),
+        jobs=jobs,
+        executor=executor,
+        progress=progress,
+        description="sweep",
+    )
     benchmark = BenchmarkRun(
         trackers=tuple(c.label for c in combinations),
         sequences=tuple(sequences),
-        results=results,
+        results=runs.results,
         colour_features=colour_features,
-        computed=len(pending),
-        resumed=resumed,
+        computed=runs.computed,
+        resumed=runs.resumed,
     )
     return SweepRun(tuple(combinations), benchmark)
-
-
-def _execute(
-    tasks: list[tuple[Combination, BenchmarkSequence]], jobs: int, executor: Executor | None
-) -> Iterator[TaskResult]:
-    if not tasks:
-        return
-    if executor is None and jobs == 1:
-        for combination, sequence in tasks:
-            yield run_combination(combination.label, combination.params, sequence)
-        return
-    if executor is not None:
-        yield from _map_unordered(executor, tasks)
-        return
-    with (
-        _environment(SINGLE_THREAD_ENVIRONMENT),
-        ProcessPoolExecutor(
-            max_workers=min(jobs, len(tasks)), mp_context=get_context("spawn")
-        ) as pool,
-    ):
-        yield from _map_unordered(pool, tasks)
-
-
-def _map_unordered(
-    executor: Executor, tasks: list[tuple[Combination, BenchmarkSequence]]
-) -> Iterator[TaskResult]:
-    futures: list[Future[TaskResult]] = [
-        executor.submit(run_combination, combination.label, combination.params, sequence)
-        for combination, sequence in tasks
-    ]
-    try:
-        for future in as_completed(futures):
-            yield future.result()
-    finally:
-        for future in futures:
-            future.cancel()
 
 
 # ---------------------------------------------------------------------------------------------
