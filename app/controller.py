@@ -362,19 +362,24 @@ class TabController(SessionCommands):
         """Place the boxes of the sequence's boxes.json on frame 1, one target per landmark
         (a list of boxes is assigned to landmarks by the correspondence search)."""
         run = self.require_run()
-        if self.boxes_path is None or run.scene is None:
-            raise InputError("this sequence has no boxes.json")
-        if run.targets:  # it adds a target per landmark: more would pass the cap, or stack
-            raise InputError(
-                f"boxes.json adds a target for every landmark: delete the {len(run.targets)} "
-                "drawn first, or draw the rest by hand"
-            )
-        boxes = boxes_by_landmark(read_boxes_json(self.boxes_path), run.scene)
+        boxes = self.boxes_json_boxes("this sequence has no boxes.json")
         self.stop_playing()
         self.cursor = 0
         run.add_targets(0, boxes)
         self.message = f"Loaded {len(boxes)} boxes from boxes.json on frame 1."
         self.claim_recording()
+
+    def boxes_json_boxes(self, missing: str) -> dict[str, Box]:
+        """The boxes.json boxes by landmark, for a run with no target yet (file or live)."""
+        run = self.require_run()
+        if self.boxes_path is None or run.scene is None:
+            raise InputError(missing)
+        if run.targets:  # it adds a target per landmark: more would pass the cap, or stack
+            raise InputError(
+                f"boxes.json adds a target for every landmark: delete the {len(run.targets)} "
+                "drawn first, or draw the rest by hand"
+            )
+        return boxes_by_landmark(read_boxes_json(self.boxes_path), run.scene)
 
     # -- playback -----------------------------------------------------------------------------
 

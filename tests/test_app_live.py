@@ -284,3 +284,20 @@ def test_the_live_source_is_shown_relative_to_its_allowed_folder(
     assert "Live: media/flight.avi." in shown[0] and "**media/flight.avi**" in shown[1]
     assert "**media/flight.avi**" in shown[3]
     controller.close()
+
+
+def test_live_boxes_json_refuses_to_stack_on_drawn_targets(tmp_path: Path, media: Path) -> None:
+    """As on a file: boxes.json adds a target per landmark, so once a box is drawn on the
+    frozen frame it is refused with the same message and adds nothing."""
+    controller, live = _live_tab(tmp_path)
+    live.open_source("flight.avi", str(DEMO_DIR / "scene.json"))
+    live.step()
+    live.freeze()
+    controller.place_box((100.0, 100.0, 40.0, 40.0))
+    assert list(controller.run.targets) == ["T1"]
+    with pytest.raises(InputError, match="delete the 1 drawn first"):
+        live.load_boxes_json()
+    assert list(controller.run.targets) == ["T1"]
+    assert live.state == FROZEN
+    live.halt()
+    controller.close()
