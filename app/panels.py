@@ -175,7 +175,7 @@ def _targets_panel(gui: viser.GuiApi) -> TargetsPanel:
             ),
             box=gui.add_text("Box x, y, w, h", initial_value=""),
             apply_box=gui.add_button("Apply typed box"),
-            delete=gui.add_button("Delete target", color="red"),
+            delete=gui.add_button(delete_label(None, False), color="red", disabled=True),
             boxes_json=gui.add_button("Load boxes.json", visible=False),
             show_truth=gui.add_checkbox("Show ground truth", False, visible=False),
             from_truth=gui.add_button("Start from ground truth", visible=False),
@@ -414,12 +414,23 @@ def show_targets(panels: Panels, controller: TabController) -> None:
     quiet.set(widgets.landmark, "value", landmark or NO_LANDMARK)
     quiet.set(widgets.landmark, "disabled", chosen is None)
     quiet.set(widgets.delete, "disabled", chosen is None)
+    quiet.set(widgets.delete, "label", delete_label(chosen and chosen.id, bool(targets)))
     quiet.set(widgets.boxes_json, "visible", controller.boxes_path is not None)
     quiet.set(widgets.show_truth, "visible", controller.truth is not None)
     quiet.set(widgets.from_truth, "visible", controller.truth is not None)
     if chosen is not None and controller.cursor in chosen.results:
         quiet.set(widgets.box, "value", format_box(chosen.results[controller.cursor].box))
     quiet.set(widgets.table, "content", targets_table(controller))
+
+
+def delete_label(chosen: str | None, any_target: bool) -> str:
+    """The Delete button says what it deletes, or while greyed what enables it (tooltips on
+    disabled buttons do not show)."""
+    if chosen is not None:
+        return f"Delete {chosen}"
+    if any_target:
+        return "Delete target (choose it in Drag draws)"
+    return "Delete target (none yet)"
 
 
 def compact_box(box: Box) -> str:

@@ -43,6 +43,11 @@ from autotrack.errors import InputError
 
 TABLE_PERIOD = 0.25
 """Seconds between Targets-table updates while frames change (playing, tracking ahead)."""
+DRAW_HINT = (
+    "A click draws no box: hold Shift and drag from one corner of the box to the other "
+    "(on a target's box, the drag corrects it)."
+)
+"""Said when the frame canvas is clicked (viser reports a click, never a box of no size)."""
 UP = np.array([0.0, 0.0, 1.0])
 """The 3-D view's up direction (the scenes' world frame has +z up)."""
 
@@ -92,6 +97,8 @@ class Tab:
         )
         self._connect()
         scene_api.on_rect_select(modifier="shift")(self.rect_selected)
+        scene_api.on_click(modifier="shift")(self.clicked)  # a drag of no size is a click
+        scene_api.on_click()(self.clicked)
         channel.on_canvas_change(self.display.canvas_resized)
 
     def _connect(self) -> None:
@@ -228,6 +235,15 @@ class Tab:
             return
         self._busy("drawing the box: starting its tracker…")
         self.worker.submit(self.place_dragged_box, event.screen_min, event.screen_max)
+
+    def clicked(self, event: viser.SceneClickEvent) -> None:
+        """A click on the canvas draws nothing (viser sends no rect-select for a drag of no
+        size): on the frame, say how to draw; a shift-click on the 3-D view, where to."""
+        if self.panels.display.canvas.value == CANVAS_FRAME:
+            self.channel.notify("AutoTrack Studio", DRAW_HINT)
+            self.worker.submit(self._tell, DRAW_HINT)
+        elif event.modifier == "shift":
+            self.worker.submit(self._tell, "switch the canvas to 'frame' to draw boxes")
 
     def place_dragged_box(
         self, screen_min: tuple[float, float], screen_max: tuple[float, float]

@@ -724,9 +724,12 @@ def test_typed_box_landmark_and_delete_through_the_widgets(studio) -> None:
     assert tab.wait_idle()
     assert "the maximum" in channel.notes[-1][0] and len(run.targets) == 4
 
+    # Greyed, the button says what enables it (a disabled button shows no tooltip).
+    assert targets.delete.disabled and "choose it in Drag draws" in targets.delete.label
     _set(targets.draw, "T1")
     assert tab.wait_idle()
     assert not targets.landmark.disabled and not targets.delete.disabled
+    assert targets.delete.label == "Delete T1"
     landmark_of_t1 = run.targets["T1"].landmark_id
     assert targets.landmark.value == landmark_of_t1
     _set(targets.landmark, "none")
@@ -882,6 +885,45 @@ def test_drawing_needs_the_frame_canvas(studio) -> None:
     assert tab.wait_idle()
     assert not tab.controller.run.targets and "switch the canvas" in tab.controller.message
     assert moves >= 2  # switching to the 3-D view aimed the camera
+
+
+def test_a_click_on_the_frame_says_how_to_draw_a_box(studio) -> None:
+    """viser sends no rect-select for a shift-click (a drag of no size), only a click: the
+    user is told to drag, at once and in the status line; on the 3-D view, to switch."""
+    from app.tab import DRAW_HINT
+
+    tab, channel = _open_tab(studio)
+    assert "none yet" in tab.panels.targets.delete.label
+    for modifier in ("shift", None):
+        channel.notes.clear()
+        tab.clicked(
+            viser.SceneClickEvent(
+                client=None,
+                client_id=0,
+                ray_origin=(0.0, 0.0, 0.0),
+                ray_direction=(0.0, 0.0, 1.0),
+                screen_pos=(0.5, 0.5),
+                modifier=modifier,
+            )
+        )
+        assert tab.wait_idle()
+        assert channel.notes == [(DRAW_HINT, False)] and tab.controller.message == DRAW_HINT
+        assert "hold Shift and drag" in DRAW_HINT and not tab.controller.run.targets
+    _set(tab.panels.display.canvas, "3-D view")
+    assert tab.wait_idle()
+    channel.notes.clear()
+    tab.clicked(
+        viser.SceneClickEvent(
+            client=None,
+            client_id=0,
+            ray_origin=(0.0, 0.0, 0.0),
+            ray_direction=(0.0, 0.0, 1.0),
+            screen_pos=(0.5, 0.5),
+            modifier="shift",
+        )
+    )
+    assert tab.wait_idle()
+    assert not channel.notes and "switch the canvas" in tab.controller.message
 
 
 def test_shared_benchmark_sequence_opens_by_typed_path_and_tracks(tmp_path: Path) -> None:
