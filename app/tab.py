@@ -20,7 +20,7 @@ from app.boxes import parse_box
 from app.channel import ClientChannel
 from app.config import AppConfig
 from app.controller import TabController
-from app.display import DisplayLoop
+from app.display import DEFAULT_CANVAS_SIZE, DisplayLoop
 from app.live import FROZEN, OFF, PREVIEW, LiveControl
 from app.owners import BrowserSpace
 from app.panels import (
@@ -38,6 +38,7 @@ from app.panels import (
 )
 from app.paths import shown_paths
 from app.recordings import RecordingRegistry
+from app.view3d import DEFAULT_FOV
 from app.worker import Worker
 from autotrack.errors import InputError
 
@@ -82,6 +83,8 @@ class Tab:
             max_targets=config.max_targets,
         )
         self._scene_shown = 0
+        self._framed: tuple[object, bool] = (None, False)
+        """(run, with its trajectory) the 3-D view was last framed on."""
         self._table_shown = 0.0
         controller = self.controller
         self.live = LiveControl(controller, config.allow_live)
@@ -307,6 +310,7 @@ class Tab:
             self._aim_camera()
             self.display.wake(canvas=True)
             show_opened(self.panels, controller)
+        self._frame_localisation_start()
         self._publish()
 
     def _step_done(self) -> None:
@@ -319,6 +323,7 @@ class Tab:
         if now >= self._table_shown + TABLE_PERIOD:  # the Targets table follows playback
             show_targets(self.panels, self.controller)
             self._table_shown = now
+        self._frame_localisation_start()
         self._publish()
 
     def _publish(self) -> None:
@@ -343,13 +348,26 @@ class Tab:
         self._publish()
 
     def _aim_camera(self) -> None:
-        """Frame the scene, the ground truth and the estimated trajectory in the 3-D view."""
+        """Frame the scene, the ground truth and the estimated trajectory in the 3-D view, as
+        the tab's canvas and camera show it."""
         run = self.controller.run
         trajectory = None if run is None else [p for _, p in run.valid_positions()]
+        width, height = self.channel.canvas_size() or DEFAULT_CANVAS_SIZE
+        fov = self.channel.field_of_view() or DEFAULT_FOV
         eye, centre = self.display.view3d.viewpoint(
-            None if not trajectory else np.array(trajectory)
+            None if not trajectory else np.array(trajectory), fov, width / max(1, height)
         )
         self.channel.look_at(eye, centre, UP)
+        self._framed = (run, bool(trajectory))
+
+    def _frame_localisation_start(self) -> None:
+        """Frame the 3-D view again once the run has its first trusted pose (localisation
+        started), so the trajectory is framed as it begins, not only the scene."""
+        run = self.controller.run
+        if run is None or run.scene is None or self._framed == (run, True):
+            return
+        if any(pose.valid for pose in run.poses.values()):
+            self._aim_camera()
 
     def wait_idle(self, timeout: float = 60.0) -> bool:
         """Block until every queued command ran and playback stopped; False on timeout."""

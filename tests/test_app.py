@@ -378,6 +378,9 @@ class RecordingChannel:
     def on_canvas_change(self, callback) -> None:
         self.changed = callback
 
+    def field_of_view(self) -> float:
+        return np.radians(50.0)
+
     def look_at(self, position, target, up) -> None:
         self.camera_moves += 1
 
@@ -961,9 +964,28 @@ def test_shared_benchmark_sequence_opens_by_typed_path_and_tracks(tmp_path: Path
         studio.stop()
 
 
+def _screen_fractions(eye, centre, points, fov, aspect) -> np.ndarray:
+    """(n, 2) points as fractions of the view's half-width and half-height (|v| <= 1 is on
+    screen) for a camera at `eye` looking at `centre` with +z up."""
+    forward = (centre - eye) / np.linalg.norm(centre - eye)
+    right = np.cross(forward, [0.0, 0.0, 1.0])
+    right /= np.linalg.norm(right)
+    up = np.cross(right, forward)
+    offsets = np.asarray(points) - eye
+    depth = offsets @ forward
+    assert (depth > 0).all()  # every point in front of the eye
+    tan_y = np.tan(fov / 2)
+    return np.stack(
+        [offsets @ right / depth / (tan_y * aspect), offsets @ up / depth / tan_y], axis=1
+    )
+
+
 def test_the_3d_view_frames_landmarks_ground_truth_and_trajectory() -> None:
+    """The view fits the landmarks, the ground truth and the estimated trajectory tightly
+    (all inside, filling the view along one axis) for the browser's own view angle and
+    canvas shape, tall or wide; so the demo's flight is not a speck in the middle."""
     from app.boxes import ground_truth_positions
-    from app.view3d import SceneView
+    from app.view3d import FRAME_MARGIN, SceneView
     from autotrack.localization.scene import load_scene
 
     scene = load_scene(DEMO / "scene.json")
@@ -973,14 +995,48 @@ def test_the_3d_view_frames_landmarks_ground_truth_and_trajectory() -> None:
     view.show_scene(scene, truth)
     server.stop()
     far = truth[-1] + np.array([6.0, -4.0, 2.0])  # an estimate that drifted far away
+    landmarks = [lm.position for lm in scene.landmarks]
     for trajectory in (None, np.array([truth[0], far])):
-        eye, centre = view.viewpoint(trajectory)
-        axis = (centre - eye) / np.linalg.norm(centre - eye)
-        points = [lm.position for lm in scene.landmarks] + list(truth)
-        points += [] if trajectory is None else list(trajectory)
-        for point in points:  # inside a 50° cone: visible in the 60°-wide view
-            ray = (point - eye) / np.linalg.norm(point - eye)
-            assert np.degrees(np.arccos(np.clip(ray @ axis, -1, 1))) < 25.0
+        points = landmarks + list(truth) + ([] if trajectory is None else list(trajectory))
+        for fov, aspect in ((np.radians(50), 16 / 9), (np.radians(75), 0.69), (1.0, 1.0)):
+            eye, centre = view.viewpoint(trajectory, fov, aspect)
+            on_screen = np.abs(_screen_fractions(eye, centre, points, fov, aspect))
+            assert on_screen.max() <= FRAME_MARGIN + 1e-9
+            assert on_screen.max() >= FRAME_MARGIN - 0.05  # tight, not a speck
+    # The demo's flight (its ground truth) spans a third of a tall canvas's width or more
+    # (the sphere-fitted view before gave it 11 %).
+    fov, aspect = np.radians(75), 0.69
+    eye, centre = view.viewpoint(None, fov, aspect)
+    flight = _screen_fractions(eye, centre, truth, fov, aspect)
+    assert np.ptp(flight[:, 0]) / 2 >= 0.3
+
+
+def test_the_3d_view_is_framed_again_when_localisation_starts_and_on_reopening(
+    studio,
+) -> None:
+    """Opening frames the scene; the first trusted pose (the fourth box) frames it again with
+    the trajectory, once: later frames leave the user's view alone; reopening frames it."""
+    tab, channel = _open_tab(studio)
+    opened = channel.camera_moves
+    assert opened >= 1
+    boxes = _demo_boxes()
+    for landmark_id in ("A", "B", "C"):
+        _drag(tab, boxes[landmark_id])
+    assert channel.camera_moves == opened  # no pose from three boxes yet
+    _drag(tab, boxes["D"])
+    run = tab.controller.run
+    assert run.poses[0].valid and channel.camera_moves == opened + 1
+    _click(tab.panels.playback.step)
+    _click(tab.panels.playback.step)
+    assert tab.wait_idle()
+    assert channel.camera_moves == opened + 1
+    name = run.session_path.name
+    _click(tab.panels.session.refresh)
+    assert tab.wait_idle()
+    _set(tab.panels.session.sessions, name)
+    _click(tab.panels.session.reopen)
+    assert tab.wait_idle()
+    assert tab.controller.run is not run and channel.camera_moves > opened + 1
 
 
 def test_one_browser_does_not_see_another_browsers_sessions_and_uploads(studio) -> None:
