@@ -38,6 +38,7 @@ MAP_KINDS = {
     MAPS_VARIATION: "local_variation",
     MAPS_VARIATION_TARGET: "local_variation_target",
 }
+BOXES_JSON = "Load boxes.json"
 TRAJECTORY_RAW = "raw poses"
 TRAJECTORY_SMOOTHED = "smoothed (0.3 s lag)"
 """Maps choice -> the map `draw_overlays` blends over the frame."""
@@ -147,7 +148,17 @@ def show_live(panels: Panels, live: LiveControl) -> None:
     quiet.set(widgets.start, "disabled", live.state != FROZEN)
     quiet.set(widgets.stop, "disabled", live.state == OFF)
     quiet.set(widgets.open, "disabled", live.state == TRACKING)
-    quiet.set(panels.targets.boxes_json, "disabled", live.state in (PREVIEW, TRACKING))
+
+
+def show_boxes_json(panels: Panels, any_target: bool, live_state: str) -> None:
+    """Load boxes.json adds a target per landmark on a still frame: greyed once a target
+    exists or while a live source runs, and then saying why (after each command)."""
+    waiting = {PREVIEW: "freeze a frame first", TRACKING: "Stop first"}.get(live_state)
+    if waiting is None and any_target:
+        waiting = "delete the targets first"
+    button, quiet = panels.targets.boxes_json, panels.quiet
+    quiet.set(button, "disabled", waiting is not None)
+    quiet.set(button, "label", BOXES_JSON if waiting is None else f"{BOXES_JSON} ({waiting})")
 
 
 @dataclass
@@ -176,7 +187,7 @@ def _targets_panel(gui: viser.GuiApi) -> TargetsPanel:
             box=gui.add_text("Box x, y, w, h", initial_value=""),
             apply_box=gui.add_button("Apply typed box"),
             delete=gui.add_button(delete_label(None, False), color="red", disabled=True),
-            boxes_json=gui.add_button("Load boxes.json", visible=False),
+            boxes_json=gui.add_button(BOXES_JSON, visible=False),
             show_truth=gui.add_checkbox("Show ground truth", False, visible=False),
             from_truth=gui.add_button("Start from ground truth", visible=False),
         )

@@ -30,6 +30,7 @@ from app.panels import (
     NEW_TARGET,
     NO_LANDMARK,
     build_panels,
+    show_boxes_json,
     show_frame,
     show_live,
     show_opened,
@@ -301,6 +302,7 @@ class Tab:
         self.live.forget_if_replaced()
         show_state(self.panels, controller)  # first: it may replace the sequence list
         show_live(self.panels, self.live)
+        show_boxes_json(self.panels, bool(controller.targets()), self.live.state)
         if controller.sequences_opened != self._scene_shown:
             self._scene_shown = controller.sequences_opened
             run = controller.run

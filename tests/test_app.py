@@ -511,6 +511,14 @@ def test_boxes_json_button_places_the_demo_boxes(studio) -> None:
     for target in run.targets.values():
         np.testing.assert_allclose(target.results[0].box, boxes[target.landmark_id], atol=2.0)
     assert run.poses[0].valid
+    # A second press would stack a target per landmark: greyed, the button says so.
+    button = tab.panels.targets.boxes_json
+    assert button.disabled and button.label == "Load boxes.json (delete the targets first)"
+    for target_id in list(run.targets):
+        _set(tab.panels.targets.draw, target_id)
+        _click(tab.panels.targets.delete)
+        assert tab.wait_idle()
+    assert not run.targets and not button.disabled and button.label == "Load boxes.json"
 
 
 def _tracked_to(tab, target_id: str) -> int:
