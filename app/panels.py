@@ -386,6 +386,7 @@ def show_opened(panels: Panels, controller: TabController) -> None:
     shown_scene = "" if scene_path is None else display_name(scene_path, roots)
     quiet.set(sequence.scene, "value", shown_scene)
     quiet.set(sequence.preset, "value", controller.preset_name)
+    quiet.set(panels.targets.box, "value", "")  # a box typed for the run before is not this one's
     quiet.set(panels.playback.frame, "max", max(2, 0 if run is None else run.frame_count))
     listed = next((n for n, p in controller.sequence_choices.items() if p == path), None)
     if listed is not None:  # the list shows the sequence that is open

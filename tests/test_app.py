@@ -827,9 +827,12 @@ def test_reopened_session_restores_targets_and_continues(studio) -> None:
     tab, _ = _open_tab(studio, tab_id=2)
     _click(tab.panels.session.refresh)
     assert tab.wait_idle()
+    _set(tab.panels.targets.box, "1, 2, zz")  # a refused typed box ...
+    _click(tab.panels.targets.apply_box)
     _set(tab.panels.session.sessions, old_path.name)
     _click(tab.panels.session.reopen)
     assert tab.wait_idle()
+    assert tab.panels.targets.box.value == ""  # ... is not left over the reopened run
 
     controller = tab.controller
     run = controller.run
