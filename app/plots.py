@@ -46,9 +46,10 @@ Chart = tuple[np.ndarray | list[float | None], ...]
 
 def x_range(last: int, frame_count: int) -> tuple[float, float]:
     """Frames 0 .. the next multiple of X_STEP past `last` (at most the sequence's end), so the
-    charts fill up as the run advances and rescale only every X_STEP frames."""
+    charts fill up as the run advances and rescale only every X_STEP frames; on the last
+    frame, just past it, so the current-frame line drawn after it stays in view."""
     end = min(frame_count - 1, (last // X_STEP + 1) * X_STEP)
-    return (0.0, float(max(end, 1)))
+    return (0.0, float(max(end, 1, last + 2 * CURSOR_OFFSETS[-1])))
 
 
 def _finite(arrays: Sequence[np.ndarray]) -> np.ndarray:

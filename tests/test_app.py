@@ -329,6 +329,17 @@ def test_the_cursor_line_stands_at_the_current_frame() -> None:
     np.testing.assert_array_equal(values[np.isin(x, np.arange(5))], np.arange(5) * 10.0)
 
 
+def test_the_cursor_line_stays_in_the_x_range_on_the_last_frame() -> None:
+    from app.plots import CURSOR_OFFSETS, chart_data, x_range
+
+    for last, count in ((59, 60), (10, 60), (0, 1), (120, 121)):
+        x, _values, line = chart_data(last + 1, [np.zeros(last + 1)], last, (0.0, 1.0))
+        low, high = x_range(last, count)
+        drawn = [at for at, value in zip(x, line, strict=True) if value is not None]
+        assert len(drawn) == len(CURSOR_OFFSETS) and low <= min(drawn) and max(drawn) <= high
+    assert x_range(10, 60) == (0.0, 50.0) and x_range(59, 60)[1] < 59.01
+
+
 def test_local_variation_colour_scale_ignores_a_few_extreme_values() -> None:
     from app.canvas import colour_map, map_tile, robust_limits
 
