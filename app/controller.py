@@ -9,6 +9,7 @@ ever sees the immutable `FrameView` snapshots of `snapshot()`. Tests drive this 
 
 from __future__ import annotations
 
+import shutil
 import time
 from collections.abc import Callable
 from pathlib import Path
@@ -177,8 +178,13 @@ class TabController(SessionCommands):
         path = store_upload(
             file_name, content, self.space.upload_dir, limits, quota_root=quota_root
         )
-        self.refresh_sequences()
-        self.open(path, None)
+        try:
+            self.open(path, None)
+        except Exception:  # not a readable video or image set: not kept, nor listed
+            shutil.rmtree(path if path.is_dir() else path.parent, ignore_errors=True)
+            raise
+        finally:
+            self.refresh_sequences()
 
     def open(self, path: Path, scene_path: Path | None, *, scene_given: bool = False) -> None:
         """Open a sequence (and its scene: `scene_path`, else a scene.json beside it unless

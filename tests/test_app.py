@@ -884,6 +884,19 @@ def test_uploaded_zip_opens_as_a_sequence(studio) -> None:
     assert not tab.panels.targets.boxes_json.visible
 
 
+def test_an_upload_that_does_not_open_is_neither_kept_nor_listed(studio) -> None:
+    """A file named .mp4 that is no video is refused in one line, and deleted: listed, it
+    would fail again each time it is picked. The open run stays."""
+    tab, channel = _open_tab(studio)
+    demo = tab.controller.run
+    tab.receive_upload("flight.mp4", b"this is not a video" * 50)
+    assert tab.wait_idle()
+    assert "cannot open video" in channel.notes[-1][0] and channel.notes[-1][1]
+    assert tab.controller.run is demo
+    assert not [p for p in studio.config.upload_dir.rglob("*") if p.is_file()]
+    assert not any("flight" in name for name in tab.controller.sequence_choices)
+
+
 def test_a_drag_off_the_frame_is_refused_and_one_past_its_edge_is_cut(studio) -> None:
     tab, _ = _open_tab(studio)
     width, height = tab.controller.frame_size
