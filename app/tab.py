@@ -50,6 +50,8 @@ DRAW_HINT = (
     "(on a target's box, the drag corrects it)."
 )
 """Said when the frame canvas is clicked (viser reports a click, never a box of no size)."""
+SWITCH_HINT = "switch Display → Canvas to 'frame' to draw boxes"
+"""Said when a box is drawn on the 3-D view."""
 UP = np.array([0.0, 0.0, 1.0])
 """The 3-D view's up direction (the scenes' world frame has +z up)."""
 
@@ -235,7 +237,7 @@ class Tab:
     def rect_selected(self, event: viser.SceneRectSelectEvent) -> None:
         """A shift-drag on the canvas: a box at the current frame (queued)."""
         if self.panels.display.canvas.value != CANVAS_FRAME:
-            self.worker.submit(self._tell, "switch the canvas to 'frame' to draw boxes")
+            self._hint(SWITCH_HINT)
             return
         self._busy("drawing the box: starting its tracker…")
         self.worker.submit(self.place_dragged_box, event.screen_min, event.screen_max)
@@ -244,10 +246,9 @@ class Tab:
         """A click on the canvas draws nothing (viser sends no rect-select for a drag of no
         size): on the frame, say how to draw; a shift-click on the 3-D view, where to."""
         if self.panels.display.canvas.value == CANVAS_FRAME:
-            self.channel.notify("AutoTrack Studio", DRAW_HINT)
-            self.worker.submit(self._tell, DRAW_HINT)
+            self._hint(DRAW_HINT)
         elif event.modifier == "shift":
-            self.worker.submit(self._tell, "switch the canvas to 'frame' to draw boxes")
+            self._hint(SWITCH_HINT)
 
     def place_dragged_box(
         self, screen_min: tuple[float, float], screen_max: tuple[float, float]
@@ -338,6 +339,11 @@ class Tab:
         rewritten when it is done."""
         status = self.panels.status
         self.panels.quiet.set(status, "content", f"⏳ **Working**: {what}\n\n{status.content}")
+
+    def _hint(self, message: str) -> None:
+        """Say how to use the canvas, over it (a note) and in the status line."""
+        self.channel.notify("AutoTrack Studio", message)
+        self.worker.submit(self._tell, message)
 
     def _tell(self, message: str) -> None:
         self.controller.message = message

@@ -921,14 +921,15 @@ def test_drawing_needs_the_frame_canvas(studio) -> None:
         )
     )
     assert tab.wait_idle()
-    assert not tab.controller.run.targets and "switch the canvas" in tab.controller.message
+    assert not tab.controller.run.targets and "Canvas to 'frame'" in tab.controller.message
+    assert "Canvas to 'frame'" in channel.notes[-1][0]  # said over the canvas too
     assert moves >= 2  # switching to the 3-D view aimed the camera
 
 
 def test_a_click_on_the_frame_says_how_to_draw_a_box(studio) -> None:
     """viser sends no rect-select for a shift-click (a drag of no size), only a click: the
     user is told to drag, at once and in the status line; on the 3-D view, to switch."""
-    from app.tab import DRAW_HINT
+    from app.tab import DRAW_HINT, SWITCH_HINT
 
     tab, channel = _open_tab(studio)
     assert "none yet" in tab.panels.targets.delete.label
@@ -961,7 +962,7 @@ def test_a_click_on_the_frame_says_how_to_draw_a_box(studio) -> None:
         )
     )
     assert tab.wait_idle()
-    assert not channel.notes and "switch the canvas" in tab.controller.message
+    assert channel.notes == [(SWITCH_HINT, False)] and tab.controller.message == SWITCH_HINT
 
 
 def test_shared_benchmark_sequence_opens_by_typed_path_and_tracks(tmp_path: Path) -> None:
