@@ -532,6 +532,32 @@ def test_boxes_json_button_places_the_demo_boxes(studio) -> None:
     assert not run.targets and not button.disabled and button.label == "Load boxes.json"
 
 
+def test_an_overlay_with_no_map_on_the_frame_says_why(studio) -> None:
+    """On the boxes' first frame there is no response map (and on the next no local
+    variation): the status says so instead of leaving an empty overlay unexplained."""
+    tab, _ = _open_tab(studio)
+    _click(tab.panels.targets.boxes_json)
+    assert tab.wait_idle()
+    status = tab.panels.status
+    _wait_for(lambda: "No response map on this frame yet" in status.content)
+    _set(tab.panels.display.maps, "local variation on frame")
+    _click(tab.panels.playback.step)
+    assert tab.wait_idle()
+    _wait_for(
+        lambda: "frame 2 / 60" in status.content and "No local-variation map" in status.content
+    )
+    _click(tab.panels.playback.step)
+    assert tab.wait_idle()
+    _wait_for(lambda: "frame 3 / 60" in status.content)
+    assert "No local-variation map" not in status.content
+    _set(tab.panels.display.maps, "off")
+    _click(tab.panels.playback.step_back)
+    _click(tab.panels.playback.step_back)
+    assert tab.wait_idle()
+    _wait_for(lambda: "frame 1 / 60" in status.content)
+    assert "map on this frame" not in status.content  # nothing asked for, nothing said
+
+
 def _tracked_to(tab, target_id: str) -> int:
     """The 'tracked to' column of a target's row in the Targets table."""
     for row in tab.panels.targets.table.content.splitlines():
