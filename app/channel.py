@@ -31,6 +31,9 @@ class ClientChannel(Protocol):
     def on_canvas_change(self, callback: Callable[[], None]) -> None:
         """Call `callback` whenever the canvas size or the camera changes."""
 
+    def field_of_view(self) -> float | None:
+        """The viewing camera's vertical angle in radians, None until known."""
+
     def look_at(self, position: np.ndarray, target: np.ndarray, up: np.ndarray) -> None:
         """Move the tab's viewing camera."""
 
@@ -69,6 +72,9 @@ class ViserClientChannel:
 
     def on_canvas_change(self, callback: Callable[[], None]) -> None:
         self.client.camera.on_update(lambda _camera: callback())
+
+    def field_of_view(self) -> float | None:
+        return float(self.client.camera.fov)
 
     def look_at(self, position: np.ndarray, target: np.ndarray, up: np.ndarray) -> None:
         with self.client.atomic():

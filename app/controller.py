@@ -9,6 +9,7 @@ ever sees the immutable `FrameView` snapshots of `snapshot()`. Tests drive this 
 
 from __future__ import annotations
 
+import shutil
 import time
 from collections.abc import Callable
 from pathlib import Path
@@ -177,8 +178,13 @@ class TabController(SessionCommands):
         path = store_upload(
             file_name, content, self.space.upload_dir, limits, quota_root=quota_root
         )
-        self.refresh_sequences()
-        self.open(path, None)
+        try:
+            self.open(path, None)
+        except Exception:  # not a readable video or image set: not kept, nor listed
+            shutil.rmtree(path if path.is_dir() else path.parent, ignore_errors=True)
+            raise
+        finally:
+            self.refresh_sequences()
 
     def open(self, path: Path, scene_path: Path | None, *, scene_given: bool = False) -> None:
         """Open a sequence (and its scene: `scene_path`, else a scene.json beside it unless
@@ -362,19 +368,24 @@ class TabController(SessionCommands):
         """Place the boxes of the sequence's boxes.json on frame 1, one target per landmark
         (a list of boxes is assigned to landmarks by the correspondence search)."""
         run = self.require_run()
-        if self.boxes_path is None or run.scene is None:
-            raise InputError("this sequence has no boxes.json")
-        if run.targets:  # it adds a target per landmark: more would pass the cap, or stack
-            raise InputError(
-                f"boxes.json adds a target for every landmark: delete the {len(run.targets)} "
-                "drawn first, or draw the rest by hand"
-            )
-        boxes = boxes_by_landmark(read_boxes_json(self.boxes_path), run.scene)
+        boxes = self.boxes_json_boxes("this sequence has no boxes.json")
         self.stop_playing()
         self.cursor = 0
         run.add_targets(0, boxes)
         self.message = f"Loaded {len(boxes)} boxes from boxes.json on frame 1."
         self.claim_recording()
+
+    def boxes_json_boxes(self, missing: str) -> dict[str, Box]:
+        """The boxes.json boxes by landmark, for a run with no target yet (file or live)."""
+        run = self.require_run()
+        if self.boxes_path is None or run.scene is None:
+            raise InputError(missing)
+        if run.targets:  # it adds a target per landmark: more would pass the cap, or stack
+            raise InputError(
+                f"boxes.json adds a target for every landmark: delete the {len(run.targets)} "
+                "drawn first, or draw the rest by hand"
+            )
+        return boxes_by_landmark(read_boxes_json(self.boxes_path), run.scene)
 
     # -- playback -----------------------------------------------------------------------------
 

@@ -91,6 +91,23 @@ def map_panel_image(view: FrameView, target_id: str) -> np.ndarray:
     return np.concatenate([rows[0], np.full((4, rows[0].shape[1], 3), 255, np.uint8), rows[1]])
 
 
+def missing_map_note(view: FrameView, map_kind: str | None) -> str:
+    """A line for the status when the chosen overlay has nothing to show on this frame (no
+    target has that map yet: a box's first frame has no detection, the local variation also
+    needs the frame before it), so an empty overlay is not taken for a broken one."""
+    if map_kind is None or not view.drawings:
+        return ""
+    results = [d.result for d in view.drawings.values() if d.result is not None]
+    field = "response_map" if map_kind == "response" else "local_variation"
+    if any(getattr(result, field) is not None for result in results):
+        return ""
+    name = "response" if map_kind == "response" else "local-variation"
+    return (
+        f"\n\nNo {name} map on this frame yet: a target has one once it was tracked "
+        "from the frame before (step forward)."
+    )
+
+
 def weights_title(trained: int | None, frame_index: int) -> str:
     """The ASR tile's title: says when the weights are those of an earlier frame's training."""
     if trained is None or trained == frame_index:
@@ -326,7 +343,8 @@ class DisplayLoop:
             self._canvas_dirty = True
 
     def _send_slow(self, view: FrameView, maps: str) -> None:
-        self.panels.quiet.set(self.panels.status, "content", view.status)
+        status = view.status + missing_map_note(view, MAP_KINDS.get(maps))
+        self.panels.quiet.set(self.panels.status, "content", status)
         self.plots.update(view.history, view.frame_index)
         self.truth_plots.update(view.truth, view.frame_index)
         self.stats.plot_updates += 1

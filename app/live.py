@@ -23,9 +23,7 @@ from app.controller import POSE_OPTIONS, TabController
 from app.paths import display_name, live_source
 from app.views import FrameView, SignalHistory
 from autotrack.errors import AutoTrackError, InputError
-from autotrack.io.boxes_json import read_boxes_json
 from autotrack.io.live import CapturedFrame, LiveFrames, LiveLog, LiveReader, describe_source
-from autotrack.localization.pnp import boxes_by_landmark
 from autotrack.localization.scene import Scene, load_scene
 from autotrack.params import preset
 from autotrack.pipeline import Pipeline, Recording
@@ -177,9 +175,7 @@ class LiveControl:
         """Place the boxes.json beside the scene (or the video) on the frozen frame."""
         controller = self.controller
         run = controller.require_run()
-        if controller.boxes_path is None or run.scene is None:
-            raise InputError("no boxes.json beside the scene file or the video")
-        boxes = boxes_by_landmark(read_boxes_json(controller.boxes_path), run.scene)
+        boxes = controller.boxes_json_boxes("no boxes.json beside the scene file or the video")
         run.add_targets(controller.cursor, boxes)
         controller.message = f"Loaded {len(boxes)} boxes from boxes.json on the frozen frame."
         controller.claim_recording()

@@ -38,6 +38,7 @@ MAP_KINDS = {
     MAPS_VARIATION: "local_variation",
     MAPS_VARIATION_TARGET: "local_variation_target",
 }
+BOXES_JSON = "Load boxes.json"
 TRAJECTORY_RAW = "raw poses"
 TRAJECTORY_SMOOTHED = "smoothed (0.3 s lag)"
 """Maps choice -> the map `draw_overlays` blends over the frame."""
@@ -147,7 +148,17 @@ def show_live(panels: Panels, live: LiveControl) -> None:
     quiet.set(widgets.start, "disabled", live.state != FROZEN)
     quiet.set(widgets.stop, "disabled", live.state == OFF)
     quiet.set(widgets.open, "disabled", live.state == TRACKING)
-    quiet.set(panels.targets.boxes_json, "disabled", live.state in (PREVIEW, TRACKING))
+
+
+def show_boxes_json(panels: Panels, any_target: bool, live_state: str) -> None:
+    """Load boxes.json adds a target per landmark on a still frame: greyed once a target
+    exists or while a live source runs, and then saying why (after each command)."""
+    waiting = {PREVIEW: "freeze a frame first", TRACKING: "Stop first"}.get(live_state)
+    if waiting is None and any_target:
+        waiting = "delete the targets first"
+    button, quiet = panels.targets.boxes_json, panels.quiet
+    quiet.set(button, "disabled", waiting is not None)
+    quiet.set(button, "label", BOXES_JSON if waiting is None else f"{BOXES_JSON} ({waiting})")
 
 
 @dataclass
@@ -175,8 +186,8 @@ def _targets_panel(gui: viser.GuiApi) -> TargetsPanel:
             ),
             box=gui.add_text("Box x, y, w, h", initial_value=""),
             apply_box=gui.add_button("Apply typed box"),
-            delete=gui.add_button("Delete target", color="red"),
-            boxes_json=gui.add_button("Load boxes.json", visible=False),
+            delete=gui.add_button(delete_label(None, False), color="red", disabled=True),
+            boxes_json=gui.add_button(BOXES_JSON, visible=False),
             show_truth=gui.add_checkbox("Show ground truth", False, visible=False),
             from_truth=gui.add_button("Start from ground truth", visible=False),
         )
@@ -375,6 +386,7 @@ def show_opened(panels: Panels, controller: TabController) -> None:
     shown_scene = "" if scene_path is None else display_name(scene_path, roots)
     quiet.set(sequence.scene, "value", shown_scene)
     quiet.set(sequence.preset, "value", controller.preset_name)
+    quiet.set(panels.targets.box, "value", "")  # a box typed for the run before is not this one's
     quiet.set(panels.playback.frame, "max", max(2, 0 if run is None else run.frame_count))
     listed = next((n for n, p in controller.sequence_choices.items() if p == path), None)
     if listed is not None:  # the list shows the sequence that is open
@@ -414,12 +426,23 @@ def show_targets(panels: Panels, controller: TabController) -> None:
     quiet.set(widgets.landmark, "value", landmark or NO_LANDMARK)
     quiet.set(widgets.landmark, "disabled", chosen is None)
     quiet.set(widgets.delete, "disabled", chosen is None)
+    quiet.set(widgets.delete, "label", delete_label(chosen and chosen.id, bool(targets)))
     quiet.set(widgets.boxes_json, "visible", controller.boxes_path is not None)
     quiet.set(widgets.show_truth, "visible", controller.truth is not None)
     quiet.set(widgets.from_truth, "visible", controller.truth is not None)
     if chosen is not None and controller.cursor in chosen.results:
         quiet.set(widgets.box, "value", format_box(chosen.results[controller.cursor].box))
     quiet.set(widgets.table, "content", targets_table(controller))
+
+
+def delete_label(chosen: str | None, any_target: bool) -> str:
+    """The Delete button says what it deletes, or while greyed what enables it (tooltips on
+    disabled buttons do not show)."""
+    if chosen is not None:
+        return f"Delete {chosen}"
+    if any_target:
+        return "Delete target (choose it in Drag draws)"
+    return "Delete target (none yet)"
 
 
 def compact_box(box: Box) -> str:

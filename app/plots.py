@@ -6,7 +6,8 @@ is drawn before its panel has its width and flashes narrow. A slot without a tar
 values.
 
 Frames without a value are sent as null, which uPlot draws as a gap (it would draw a NaN
-line across, as over a live source's dropped frames). Every chart gets an explicit y range
+line across); a frame nothing was tracked on (a live source's dropped frame) gets no row at
+all, so the lines join the tracked frames on either side. Every chart gets an explicit y range
 fitted to the finite values it shows (rounded outward, so it changes only when the data
 leaves it); a flat signal gets a range of ±10% around its value. The global variation η is on
 a log scale whose range always holds the threshold φ, so one spike cannot hide φ, with one
@@ -45,9 +46,10 @@ Chart = tuple[np.ndarray | list[float | None], ...]
 
 def x_range(last: int, frame_count: int) -> tuple[float, float]:
     """Frames 0 .. the next multiple of X_STEP past `last` (at most the sequence's end), so the
-    charts fill up as the run advances and rescale only every X_STEP frames."""
+    charts fill up as the run advances and rescale only every X_STEP frames; on the last
+    frame, just past it, so the current-frame line drawn after it stays in view."""
     end = min(frame_count - 1, (last // X_STEP + 1) * X_STEP)
-    return (0.0, float(max(end, 1)))
+    return (0.0, float(max(end, 1, last + 2 * CURSOR_OFFSETS[-1])))
 
 
 def _finite(arrays: Sequence[np.ndarray]) -> np.ndarray:
@@ -102,28 +104,52 @@ def with_gaps(values: np.ndarray) -> list[float | None]:
 
 
 def with_cursor(
-    count: int, series: Sequence[np.ndarray], cursor: int, span: tuple[float, float]
+    count: int,
+    series: Sequence[np.ndarray],
+    cursor: int,
+    span: tuple[float, float],
+    frames: np.ndarray | None = None,
 ) -> tuple[np.ndarray, ...]:
-    """(x, *series, cursor line) over frames 0..count-1 with the cursor's two points inserted
-    just after frame `cursor`; the line spans `span`."""
-    frames = np.arange(count, dtype=np.float64)
-    at = min(max(cursor, 0), count - 1) + 1
-    x = np.concatenate([frames[:at], at - 1 + np.array(CURSOR_OFFSETS), frames[at:]])
+    """(x, *series, cursor line) over `frames` (default: every frame 0..count-1; it must hold
+    the cursor's frame) with the cursor's two points inserted just after frame `cursor`; the
+    line spans `span`."""
+    cursor = min(max(cursor, 0), count - 1)
+    rows = np.arange(count) if frames is None else np.asarray(frames, dtype=np.int64)
+    at = int(np.searchsorted(rows, cursor, side="right"))
+    x = np.concatenate([rows[:at], cursor + np.array(CURSOR_OFFSETS), rows[at:]]).astype(float)
     out = [x]
     for values in series:
-        repeated = np.repeat(values[at - 1 : at], len(CURSOR_OFFSETS))
-        out.append(np.concatenate([values[:at], repeated, values[at:]]))
+        shown = values[rows]
+        repeated = np.repeat(values[cursor : cursor + 1], len(CURSOR_OFFSETS))
+        out.append(np.concatenate([shown[:at], repeated, shown[at:]]))
     line = np.full(len(x), np.nan)
     line[at : at + len(CURSOR_OFFSETS)] = span
     out.append(line)
     return tuple(out)
 
 
+def tracked_rows(history: SignalHistory, count: int, cursor: int) -> np.ndarray:
+    """The frames 0..count-1 the charts give a row: those some target has a value on or the
+    trackers ran on, and the cursor's. A frame nothing was tracked on (a live source's dropped
+    frame) gets none, so the lines join the frames either side instead of breaking into
+    fragments too short to see; a target without a value on a row still breaks its line."""
+    tracked = np.isfinite(history.frame_seconds[:count])
+    for target_id in history.target_ids:
+        for values in history.signals[target_id].values():
+            tracked |= np.isfinite(values[:count])
+    tracked[min(max(cursor, 0), count - 1)] = True
+    return np.flatnonzero(tracked)
+
+
 def chart_data(
-    count: int, series: Sequence[np.ndarray], cursor: int, span: tuple[float, float]
+    count: int,
+    series: Sequence[np.ndarray],
+    cursor: int,
+    span: tuple[float, float],
+    frames: np.ndarray | None = None,
 ) -> Chart:
     """What a chart is sent: `with_cursor`'s arrays, the y series with null gaps."""
-    x, *ys = with_cursor(count, series, cursor, span)
+    x, *ys = with_cursor(count, series, cursor, span, frames)
     return (x, *(with_gaps(values) for values in ys))
 
 
@@ -325,6 +351,7 @@ class SignalPlots:
         last = max(history.last_frame, cursor, 0)
         count = last + 1
         x_scale = {"time": False, "auto": False, "range": x_range(last, history.frame_count)}
+        rows = tracked_rows(history, count, cursor)
         for index, (handle, series) in enumerate(
             zip(self._handles, chart_series(history, count, ids), strict=True)
         ):
@@ -343,7 +370,7 @@ class SignalPlots:
             if axes != self._axes[index]:
                 handle.axes = axes
                 self._axes[index] = axes
-            send_data(handle, chart_data(count, series, cursor, span))
+            send_data(handle, chart_data(count, series, cursor, span, rows))
 
     def data_of(self, index: int) -> Sequence[np.ndarray] | None:
         """The data last sent to chart `index` (CHART_TITLES order; y series with None gaps)."""

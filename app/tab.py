@@ -20,7 +20,7 @@ from app.boxes import parse_box
 from app.channel import ClientChannel
 from app.config import AppConfig
 from app.controller import TabController
-from app.display import DisplayLoop
+from app.display import DEFAULT_CANVAS_SIZE, DisplayLoop
 from app.live import FROZEN, OFF, PREVIEW, LiveControl
 from app.owners import BrowserSpace
 from app.panels import (
@@ -30,6 +30,7 @@ from app.panels import (
     NEW_TARGET,
     NO_LANDMARK,
     build_panels,
+    show_boxes_json,
     show_frame,
     show_live,
     show_opened,
@@ -38,11 +39,19 @@ from app.panels import (
 )
 from app.paths import shown_paths
 from app.recordings import RecordingRegistry
+from app.view3d import DEFAULT_FOV
 from app.worker import Worker
 from autotrack.errors import InputError
 
 TABLE_PERIOD = 0.25
 """Seconds between Targets-table updates while frames change (playing, tracking ahead)."""
+DRAW_HINT = (
+    "A click draws no box: hold Shift and drag from one corner of the box to the other "
+    "(on a target's box, the drag corrects it)."
+)
+"""Said when the frame canvas is clicked (viser reports a click, never a box of no size)."""
+SWITCH_HINT = "switch Display → Canvas to 'frame' to draw boxes"
+"""Said when a box is drawn on the 3-D view."""
 UP = np.array([0.0, 0.0, 1.0])
 """The 3-D view's up direction (the scenes' world frame has +z up)."""
 
@@ -77,6 +86,8 @@ class Tab:
             max_targets=config.max_targets,
         )
         self._scene_shown = 0
+        self._framed: tuple[object, bool] = (None, False)
+        """(run, with its trajectory) the 3-D view was last framed on."""
         self._table_shown = 0.0
         controller = self.controller
         self.live = LiveControl(controller, config.allow_live)
@@ -92,6 +103,8 @@ class Tab:
         )
         self._connect()
         scene_api.on_rect_select(modifier="shift")(self.rect_selected)
+        scene_api.on_click(modifier="shift")(self.clicked)  # a drag of no size is a click
+        scene_api.on_click()(self.clicked)
         channel.on_canvas_change(self.display.canvas_resized)
 
     def _connect(self) -> None:
@@ -224,10 +237,18 @@ class Tab:
     def rect_selected(self, event: viser.SceneRectSelectEvent) -> None:
         """A shift-drag on the canvas: a box at the current frame (queued)."""
         if self.panels.display.canvas.value != CANVAS_FRAME:
-            self.worker.submit(self._tell, "switch the canvas to 'frame' to draw boxes")
+            self._hint(SWITCH_HINT)
             return
         self._busy("drawing the box: starting its tracker…")
         self.worker.submit(self.place_dragged_box, event.screen_min, event.screen_max)
+
+    def clicked(self, event: viser.SceneClickEvent) -> None:
+        """A click on the canvas draws nothing (viser sends no rect-select for a drag of no
+        size): on the frame, say how to draw; a shift-click on the 3-D view, where to."""
+        if self.panels.display.canvas.value == CANVAS_FRAME:
+            self._hint(DRAW_HINT)
+        elif event.modifier == "shift":
+            self._hint(SWITCH_HINT)
 
     def place_dragged_box(
         self, screen_min: tuple[float, float], screen_max: tuple[float, float]
@@ -282,6 +303,7 @@ class Tab:
         self.live.forget_if_replaced()
         show_state(self.panels, controller)  # first: it may replace the sequence list
         show_live(self.panels, self.live)
+        show_boxes_json(self.panels, bool(controller.targets()), self.live.state)
         if controller.sequences_opened != self._scene_shown:
             self._scene_shown = controller.sequences_opened
             run = controller.run
@@ -291,6 +313,7 @@ class Tab:
             self._aim_camera()
             self.display.wake(canvas=True)
             show_opened(self.panels, controller)
+        self._frame_localisation_start()
         self._publish()
 
     def _step_done(self) -> None:
@@ -303,6 +326,7 @@ class Tab:
         if now >= self._table_shown + TABLE_PERIOD:  # the Targets table follows playback
             show_targets(self.panels, self.controller)
             self._table_shown = now
+        self._frame_localisation_start()
         self._publish()
 
     def _publish(self) -> None:
@@ -316,6 +340,11 @@ class Tab:
         status = self.panels.status
         self.panels.quiet.set(status, "content", f"⏳ **Working**: {what}\n\n{status.content}")
 
+    def _hint(self, message: str) -> None:
+        """Say how to use the canvas, over it (a note) and in the status line."""
+        self.channel.notify("AutoTrack Studio", message)
+        self.worker.submit(self._tell, message)
+
     def _tell(self, message: str) -> None:
         self.controller.message = message
 
@@ -327,13 +356,26 @@ class Tab:
         self._publish()
 
     def _aim_camera(self) -> None:
-        """Frame the scene, the ground truth and the estimated trajectory in the 3-D view."""
+        """Frame the scene, the ground truth and the estimated trajectory in the 3-D view, as
+        the tab's canvas and camera show it."""
         run = self.controller.run
         trajectory = None if run is None else [p for _, p in run.valid_positions()]
+        width, height = self.channel.canvas_size() or DEFAULT_CANVAS_SIZE
+        fov = self.channel.field_of_view() or DEFAULT_FOV
         eye, centre = self.display.view3d.viewpoint(
-            None if not trajectory else np.array(trajectory)
+            None if not trajectory else np.array(trajectory), fov, width / max(1, height)
         )
         self.channel.look_at(eye, centre, UP)
+        self._framed = (run, bool(trajectory))
+
+    def _frame_localisation_start(self) -> None:
+        """Frame the 3-D view again once the run has its first trusted pose (localisation
+        started), so the trajectory is framed as it begins, not only the scene."""
+        run = self.controller.run
+        if run is None or run.scene is None or self._framed == (run, True):
+            return
+        if any(pose.valid for pose in run.poses.values()):
+            self._aim_camera()
 
     def wait_idle(self, timeout: float = 60.0) -> bool:
         """Block until every queued command ran and playback stopped; False on timeout."""

@@ -19,12 +19,54 @@ from autotrack.localization.scene import Scene
 VALID_COLOUR = (40, 180, 60)
 INVALID_COLOUR = (220, 40, 40)
 GT_COLOUR = (120, 120, 120)
+UP_AXIS = np.array([0.0, 0.0, 1.0])
+"""The scenes' world frame has +z up."""
+DEFAULT_FOV = np.radians(50.0)
+"""Vertical view angle assumed until the browser reports its camera's."""
+FRAME_MARGIN = 0.9
+"""The framed points keep within this fraction of the view's half-width and half-height."""
+NEAR_FRACTION = 0.15
+"""The eye stays at least this fraction of the points' spread behind the nearest point."""
 
 
 def wxyz_from_rotation(rotation: np.ndarray) -> np.ndarray:
     """A rotation matrix as viser's (w, x, y, z) quaternion."""
     x, y, z, w = Rotation.from_matrix(rotation).as_quat()
     return np.array([w, x, y, z])
+
+
+def framing_eye(
+    points: np.ndarray,
+    centre: np.ndarray,
+    direction: np.ndarray,
+    fov: float,
+    aspect: float,
+    margin: float = FRAME_MARGIN,
+) -> np.ndarray:
+    """The eye on the line from `centre` along `direction` (+z up), as close as it can be with
+    every point inside `margin` of a perspective view looking at `centre`: vertical angle
+    `fov` (radians), width / height `aspect`. A point q off the centre lies at depth
+    D + q.f (f the viewing direction, D the eye's distance) and must keep |q.r| <= tan_x *
+    depth and |q.u| <= tan_y * depth, so D is the largest |q.r| / tan_x - q.f, |q.u| /
+    tan_y - q.f over the points; no nearer than NEAR_FRACTION of their spread past the
+    nearest one."""
+    back = np.asarray(direction, dtype=np.float64)
+    back = back / np.linalg.norm(back)
+    forward = -back
+    right = np.cross(forward, UP_AXIS)
+    right = right / np.linalg.norm(right)
+    up = np.cross(right, forward)
+    tan_y = np.tan(fov / 2.0) * margin
+    tan_x = tan_y * aspect
+    offsets = np.asarray(points, dtype=np.float64) - centre
+    depth_offsets = offsets @ forward
+    needed = np.maximum(np.abs(offsets @ right) / tan_x, np.abs(offsets @ up) / tan_y)
+    spread = float(np.linalg.norm(np.ptp(offsets, axis=0))) if len(offsets) else 1.0
+    distance = max(
+        float(np.max(needed - depth_offsets)),
+        float(np.max(-depth_offsets)) + NEAR_FRACTION * max(spread, 0.5),
+    )
+    return centre + back * distance
 
 
 def segments_with_gaps(frames: Sequence[int], positions: np.ndarray) -> np.ndarray:
@@ -48,6 +90,7 @@ class SceneView:
         self._fov = 1.0
         self._aspect = 16 / 9
         self._scale = 0.3
+        self._frustum_scale = 0.18
         self._first_camera: np.ndarray | None = None
         self._gt_positions: np.ndarray | None = None
         self.segments_sent = 0
@@ -79,6 +122,8 @@ class SceneView:
         points = np.stack([landmark.position for landmark in scene.landmarks])
         extent = float(np.ptp(points, axis=0).max()) if len(points) > 1 else 1.0
         self._scale = max(0.05, 0.08 * extent)
+        # The framed view comes close to the flight: a smaller frustum leaves its path seen.
+        self._frustum_scale = 0.6 * self._scale
         camera = scene.camera
         self._fov = float(2.0 * np.arctan2(camera.height / 2.0, camera.fy))
         self._aspect = camera.width / camera.height
@@ -106,10 +151,16 @@ class SceneView:
                 thickness_units="screen",
             )
 
-    def viewpoint(self, trajectory: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+    def viewpoint(
+        self,
+        trajectory: np.ndarray | None = None,
+        fov: float = DEFAULT_FOV,
+        aspect: float = 16 / 9,
+    ) -> tuple[np.ndarray, np.ndarray]:
         """Where to put the viewing camera and what to look at so the landmarks, the
-        ground-truth trajectory and `trajectory` (estimated positions) all fit in a 60° view:
-        from behind and above the first ground-truth camera (else diagonally), +z up."""
+        ground-truth trajectory and `trajectory` (estimated positions) fill the view of
+        vertical angle `fov` (radians) and `aspect` (width / height): from behind and above the
+        first ground-truth camera (else diagonally), +z up."""
         if self.scene is None:
             return np.array([-3.0, -3.0, 3.0]), np.zeros(3)
         parts = [np.stack([landmark.position for landmark in self.scene.landmarks])]
@@ -119,14 +170,12 @@ class SceneView:
         points = np.concatenate(parts)
         points = points[np.isfinite(points).all(axis=1)]
         centre = (points.min(axis=0) + points.max(axis=0)) / 2.0
-        radius = float(max(0.5, np.linalg.norm(points - centre, axis=1).max()))
         if self._first_camera is not None and np.linalg.norm(self._first_camera - centre) > 1e-6:
             direction = self._first_camera - centre
             direction = direction / np.linalg.norm(direction) + np.array([0.0, 0.0, 0.5])
         else:
             direction = np.array([-1.0, -1.0, 1.0])
-        # A sphere of `radius` fills a 60° view at radius / sin(30°); 1.3 leaves a margin.
-        eye = centre + direction / np.linalg.norm(direction) * 2.0 * radius * 1.3
+        eye = framing_eye(points, centre, direction, fov, aspect)
         return eye, centre
 
     def update(self, view: PoseView, thumbnail: np.ndarray | None) -> None:
@@ -152,7 +201,7 @@ class SceneView:
                 "/studio/camera",
                 fov=self._fov,
                 aspect=self._aspect,
-                scale=self._scale,
+                scale=self._frustum_scale,
                 color=VALID_COLOUR,
                 image=thumbnail,
                 format="jpeg",
@@ -166,7 +215,7 @@ class SceneView:
                 "/studio/camera",
                 fov=self._fov,
                 aspect=self._aspect,
-                scale=self._scale,
+                scale=self._frustum_scale,
                 color=INVALID_COLOUR,
                 wxyz=wxyz_from_rotation(view.last_valid.rotation),
                 position=tuple(view.last_valid.position),

@@ -329,6 +329,17 @@ def test_the_cursor_line_stands_at_the_current_frame() -> None:
     np.testing.assert_array_equal(values[np.isin(x, np.arange(5))], np.arange(5) * 10.0)
 
 
+def test_the_cursor_line_stays_in_the_x_range_on_the_last_frame() -> None:
+    from app.plots import CURSOR_OFFSETS, chart_data, x_range
+
+    for last, count in ((59, 60), (10, 60), (0, 1), (120, 121)):
+        x, _values, line = chart_data(last + 1, [np.zeros(last + 1)], last, (0.0, 1.0))
+        low, high = x_range(last, count)
+        drawn = [at for at, value in zip(x, line, strict=True) if value is not None]
+        assert len(drawn) == len(CURSOR_OFFSETS) and low <= min(drawn) and max(drawn) <= high
+    assert x_range(10, 60) == (0.0, 50.0) and x_range(59, 60)[1] < 59.01
+
+
 def test_local_variation_colour_scale_ignores_a_few_extreme_values() -> None:
     from app.canvas import colour_map, map_tile, robust_limits
 
@@ -377,6 +388,9 @@ class RecordingChannel:
 
     def on_canvas_change(self, callback) -> None:
         self.changed = callback
+
+    def field_of_view(self) -> float:
+        return np.radians(50.0)
 
     def look_at(self, position, target, up) -> None:
         self.camera_moves += 1
@@ -508,6 +522,40 @@ def test_boxes_json_button_places_the_demo_boxes(studio) -> None:
     for target in run.targets.values():
         np.testing.assert_allclose(target.results[0].box, boxes[target.landmark_id], atol=2.0)
     assert run.poses[0].valid
+    # A second press would stack a target per landmark: greyed, the button says so.
+    button = tab.panels.targets.boxes_json
+    assert button.disabled and button.label == "Load boxes.json (delete the targets first)"
+    for target_id in list(run.targets):
+        _set(tab.panels.targets.draw, target_id)
+        _click(tab.panels.targets.delete)
+        assert tab.wait_idle()
+    assert not run.targets and not button.disabled and button.label == "Load boxes.json"
+
+
+def test_an_overlay_with_no_map_on_the_frame_says_why(studio) -> None:
+    """On the boxes' first frame there is no response map (and on the next no local
+    variation): the status says so instead of leaving an empty overlay unexplained."""
+    tab, _ = _open_tab(studio)
+    _click(tab.panels.targets.boxes_json)
+    assert tab.wait_idle()
+    status = tab.panels.status
+    _wait_for(lambda: "No response map on this frame yet" in status.content)
+    _set(tab.panels.display.maps, "local variation on frame")
+    _click(tab.panels.playback.step)
+    assert tab.wait_idle()
+    _wait_for(
+        lambda: "frame 2 / 60" in status.content and "No local-variation map" in status.content
+    )
+    _click(tab.panels.playback.step)
+    assert tab.wait_idle()
+    _wait_for(lambda: "frame 3 / 60" in status.content)
+    assert "No local-variation map" not in status.content
+    _set(tab.panels.display.maps, "off")
+    _click(tab.panels.playback.step_back)
+    _click(tab.panels.playback.step_back)
+    assert tab.wait_idle()
+    _wait_for(lambda: "frame 1 / 60" in status.content)
+    assert "map on this frame" not in status.content  # nothing asked for, nothing said
 
 
 def _tracked_to(tab, target_id: str) -> int:
@@ -724,9 +772,12 @@ def test_typed_box_landmark_and_delete_through_the_widgets(studio) -> None:
     assert tab.wait_idle()
     assert "the maximum" in channel.notes[-1][0] and len(run.targets) == 4
 
+    # Greyed, the button says what enables it (a disabled button shows no tooltip).
+    assert targets.delete.disabled and "choose it in Drag draws" in targets.delete.label
     _set(targets.draw, "T1")
     assert tab.wait_idle()
     assert not targets.landmark.disabled and not targets.delete.disabled
+    assert targets.delete.label == "Delete T1"
     landmark_of_t1 = run.targets["T1"].landmark_id
     assert targets.landmark.value == landmark_of_t1
     _set(targets.landmark, "none")
@@ -813,9 +864,12 @@ def test_reopened_session_restores_targets_and_continues(studio) -> None:
     tab, _ = _open_tab(studio, tab_id=2)
     _click(tab.panels.session.refresh)
     assert tab.wait_idle()
+    _set(tab.panels.targets.box, "1, 2, zz")  # a refused typed box ...
+    _click(tab.panels.targets.apply_box)
     _set(tab.panels.session.sessions, old_path.name)
     _click(tab.panels.session.reopen)
     assert tab.wait_idle()
+    assert tab.panels.targets.box.value == ""  # ... is not left over the reopened run
 
     controller = tab.controller
     run = controller.run
@@ -856,6 +910,19 @@ def test_uploaded_zip_opens_as_a_sequence(studio) -> None:
     assert not tab.panels.targets.boxes_json.visible
 
 
+def test_an_upload_that_does_not_open_is_neither_kept_nor_listed(studio) -> None:
+    """A file named .mp4 that is no video is refused in one line, and deleted: listed, it
+    would fail again each time it is picked. The open run stays."""
+    tab, channel = _open_tab(studio)
+    demo = tab.controller.run
+    tab.receive_upload("flight.mp4", b"this is not a video" * 50)
+    assert tab.wait_idle()
+    assert "cannot open video" in channel.notes[-1][0] and channel.notes[-1][1]
+    assert tab.controller.run is demo
+    assert not [p for p in studio.config.upload_dir.rglob("*") if p.is_file()]
+    assert not any("flight" in name for name in tab.controller.sequence_choices)
+
+
 def test_a_drag_off_the_frame_is_refused_and_one_past_its_edge_is_cut(studio) -> None:
     tab, _ = _open_tab(studio)
     width, height = tab.controller.frame_size
@@ -880,8 +947,48 @@ def test_drawing_needs_the_frame_canvas(studio) -> None:
         )
     )
     assert tab.wait_idle()
-    assert not tab.controller.run.targets and "switch the canvas" in tab.controller.message
+    assert not tab.controller.run.targets and "Canvas to 'frame'" in tab.controller.message
+    assert "Canvas to 'frame'" in channel.notes[-1][0]  # said over the canvas too
     assert moves >= 2  # switching to the 3-D view aimed the camera
+
+
+def test_a_click_on_the_frame_says_how_to_draw_a_box(studio) -> None:
+    """viser sends no rect-select for a shift-click (a drag of no size), only a click: the
+    user is told to drag, at once and in the status line; on the 3-D view, to switch."""
+    from app.tab import DRAW_HINT, SWITCH_HINT
+
+    tab, channel = _open_tab(studio)
+    assert "none yet" in tab.panels.targets.delete.label
+    for modifier in ("shift", None):
+        channel.notes.clear()
+        tab.clicked(
+            viser.SceneClickEvent(
+                client=None,
+                client_id=0,
+                ray_origin=(0.0, 0.0, 0.0),
+                ray_direction=(0.0, 0.0, 1.0),
+                screen_pos=(0.5, 0.5),
+                modifier=modifier,
+            )
+        )
+        assert tab.wait_idle()
+        assert channel.notes == [(DRAW_HINT, False)] and tab.controller.message == DRAW_HINT
+        assert "hold Shift and drag" in DRAW_HINT and not tab.controller.run.targets
+    _set(tab.panels.display.canvas, "3-D view")
+    assert tab.wait_idle()
+    channel.notes.clear()
+    tab.clicked(
+        viser.SceneClickEvent(
+            client=None,
+            client_id=0,
+            ray_origin=(0.0, 0.0, 0.0),
+            ray_direction=(0.0, 0.0, 1.0),
+            screen_pos=(0.5, 0.5),
+            modifier="shift",
+        )
+    )
+    assert tab.wait_idle()
+    assert channel.notes == [(SWITCH_HINT, False)] and tab.controller.message == SWITCH_HINT
 
 
 def test_shared_benchmark_sequence_opens_by_typed_path_and_tracks(tmp_path: Path) -> None:
@@ -919,9 +1026,28 @@ def test_shared_benchmark_sequence_opens_by_typed_path_and_tracks(tmp_path: Path
         studio.stop()
 
 
+def _screen_fractions(eye, centre, points, fov, aspect) -> np.ndarray:
+    """(n, 2) points as fractions of the view's half-width and half-height (|v| <= 1 is on
+    screen) for a camera at `eye` looking at `centre` with +z up."""
+    forward = (centre - eye) / np.linalg.norm(centre - eye)
+    right = np.cross(forward, [0.0, 0.0, 1.0])
+    right /= np.linalg.norm(right)
+    up = np.cross(right, forward)
+    offsets = np.asarray(points) - eye
+    depth = offsets @ forward
+    assert (depth > 0).all()  # every point in front of the eye
+    tan_y = np.tan(fov / 2)
+    return np.stack(
+        [offsets @ right / depth / (tan_y * aspect), offsets @ up / depth / tan_y], axis=1
+    )
+
+
 def test_the_3d_view_frames_landmarks_ground_truth_and_trajectory() -> None:
+    """The view fits the landmarks, the ground truth and the estimated trajectory tightly
+    (all inside, filling the view along one axis) for the browser's own view angle and
+    canvas shape, tall or wide; so the demo's flight is not a speck in the middle."""
     from app.boxes import ground_truth_positions
-    from app.view3d import SceneView
+    from app.view3d import FRAME_MARGIN, SceneView
     from autotrack.localization.scene import load_scene
 
     scene = load_scene(DEMO / "scene.json")
@@ -931,14 +1057,48 @@ def test_the_3d_view_frames_landmarks_ground_truth_and_trajectory() -> None:
     view.show_scene(scene, truth)
     server.stop()
     far = truth[-1] + np.array([6.0, -4.0, 2.0])  # an estimate that drifted far away
+    landmarks = [lm.position for lm in scene.landmarks]
     for trajectory in (None, np.array([truth[0], far])):
-        eye, centre = view.viewpoint(trajectory)
-        axis = (centre - eye) / np.linalg.norm(centre - eye)
-        points = [lm.position for lm in scene.landmarks] + list(truth)
-        points += [] if trajectory is None else list(trajectory)
-        for point in points:  # inside a 50° cone: visible in the 60°-wide view
-            ray = (point - eye) / np.linalg.norm(point - eye)
-            assert np.degrees(np.arccos(np.clip(ray @ axis, -1, 1))) < 25.0
+        points = landmarks + list(truth) + ([] if trajectory is None else list(trajectory))
+        for fov, aspect in ((np.radians(50), 16 / 9), (np.radians(75), 0.69), (1.0, 1.0)):
+            eye, centre = view.viewpoint(trajectory, fov, aspect)
+            on_screen = np.abs(_screen_fractions(eye, centre, points, fov, aspect))
+            assert on_screen.max() <= FRAME_MARGIN + 1e-9
+            assert on_screen.max() >= FRAME_MARGIN - 0.05  # tight, not a speck
+    # The demo's flight (its ground truth) spans a third of a tall canvas's width or more
+    # (the sphere-fitted view before gave it 11 %).
+    fov, aspect = np.radians(75), 0.69
+    eye, centre = view.viewpoint(None, fov, aspect)
+    flight = _screen_fractions(eye, centre, truth, fov, aspect)
+    assert np.ptp(flight[:, 0]) / 2 >= 0.3
+
+
+def test_the_3d_view_is_framed_again_when_localisation_starts_and_on_reopening(
+    studio,
+) -> None:
+    """Opening frames the scene; the first trusted pose (the fourth box) frames it again with
+    the trajectory, once: later frames leave the user's view alone; reopening frames it."""
+    tab, channel = _open_tab(studio)
+    opened = channel.camera_moves
+    assert opened >= 1
+    boxes = _demo_boxes()
+    for landmark_id in ("A", "B", "C"):
+        _drag(tab, boxes[landmark_id])
+    assert channel.camera_moves == opened  # no pose from three boxes yet
+    _drag(tab, boxes["D"])
+    run = tab.controller.run
+    assert run.poses[0].valid and channel.camera_moves == opened + 1
+    _click(tab.panels.playback.step)
+    _click(tab.panels.playback.step)
+    assert tab.wait_idle()
+    assert channel.camera_moves == opened + 1
+    name = run.session_path.name
+    _click(tab.panels.session.refresh)
+    assert tab.wait_idle()
+    _set(tab.panels.session.sessions, name)
+    _click(tab.panels.session.reopen)
+    assert tab.wait_idle()
+    assert tab.controller.run is not run and channel.camera_moves > opened + 1
 
 
 def test_one_browser_does_not_see_another_browsers_sessions_and_uploads(studio) -> None:

@@ -403,6 +403,9 @@ def test_a_live_source_is_tracked_in_chromium(live_studio, tmp_path: Path) -> No
         page.screenshot(path=str(ARTIFACTS / "app-live-frozen-boxes.png"))
         page.get_by_role("button", name="Start tracking").click()
         _wait_for(lambda: live.state == TRACKING, what="tracking", tab=tab)
+        boxes_json = page.get_by_role("button", name="Load boxes.json (Stop first)")
+        _wait_for(lambda: boxes_json.count() == 1, what="Load boxes.json greyed while live")
+        assert boxes_json.is_disabled()
         # Past the hover and into the flight, the page gets the tracked boxes.
         _wait_for(lambda: controller.cursor > 170, timeout=90, what="the flight", tab=tab)
         _wait_for(
@@ -435,7 +438,7 @@ def test_a_live_source_is_tracked_in_chromium(live_studio, tmp_path: Path) -> No
         page.screenshot(path=str(ARTIFACTS / "app-live-tracking.png"))
         figures = live.figures()
         assert figures.processed > 10 and figures.captured >= figures.processed
-        page.get_by_role("button", name="Stop").click()
+        page.get_by_role("button", name="Stop", exact=True).click()
         _wait_for(lambda: live.state == OFF, what="the stop", tab=tab)
         assert tab.wait_idle()
         assert "recorded to" in controller.message

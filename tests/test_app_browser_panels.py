@@ -68,3 +68,42 @@ def test_chart_legends_list_only_the_targets_that_exist(studio, tmp_path) -> Non
         _wait_for(lambda: _targets_in_legends(page) == everyone, what="four in the legends")
         theta = page.evaluate(LEGENDS_JS)[CHART_TITLES.index("θ_ref (dots) and θ")]
         assert "T4 θref" in theta and "T4 θ" in theta
+
+
+def test_a_shift_click_says_how_to_draw_and_delete_says_what_enables_it(
+    studio,  # noqa: F811
+    tmp_path,
+) -> None:
+    """A shift-click with no drag draws nothing (viser reports it as a click, not a box): the
+    page tells the user to drag. The greyed Delete button says what enables it."""
+    from app.tab import DRAW_HINT
+
+    with studio_page(studio, tmp_path / "profile") as (page, tab):
+        _wait_for(lambda: tab.display.letterbox is not None, what="the frame", tab=tab)
+        delete = page.get_by_role("button", name="Delete target (none yet)")
+        assert delete.is_disabled()
+        canvas = max(
+            (c.bounding_box() for c in page.query_selector_all("canvas")),
+            key=lambda b: b["width"] * b["height"],
+        )
+        page.keyboard.down("Shift")
+        page.mouse.click(canvas["x"] + canvas["width"] / 2, canvas["y"] + canvas["height"] / 2)
+        page.keyboard.up("Shift")
+        hint = page.get_by_text(DRAW_HINT)
+        _wait_for(lambda: hint.count() >= 2, what="the hint as a note and in the status")
+        page.screenshot(path=str(tmp_path / "shift-click.png"))
+        assert tab.controller.run.targets == {}
+        load_demo_boxes(page, tab)
+        _wait_for(
+            lambda: (
+                page.get_by_role("button", name="Delete target (choose it in Drag draws)").count()
+                == 1
+            ),
+            what="the Delete button's hint",
+        )
+        page.get_by_label("Drag draws", exact=True).click()
+        page.get_by_role("option", name="T2").click()
+        delete = page.get_by_role("button", name="Delete T2")
+        _wait_for(lambda: delete.count() == 1 and delete.is_enabled(), what="Delete T2")
+        delete.click()
+        _wait_for(lambda: "T2" not in tab.controller.run.targets, what="T2 deleted", tab=tab)

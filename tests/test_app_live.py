@@ -17,6 +17,7 @@ from app.config import DEMO_DIR, AppConfig
 from app.controller import TabController
 from app.live import FROZEN, OFF, PREVIEW, TRACKING, LiveControl
 from app.paths import live_source
+from app.plots import chart_data, tracked_rows
 from app.recordings import RecordingRegistry
 from autotrack.errors import InputError
 from autotrack.io.frames import open_frames
@@ -140,6 +141,13 @@ def test_a_video_played_live_is_tracked_on_its_newest_frames_recorded_and_reopen
     view = controller.snapshot()
     assert set(view.drawings) == set(boxes[some])
     np.testing.assert_allclose(view.drawings["T2"].box, boxes[some]["T2"], atol=1e-3)
+    # Its charts give the dropped frames no row, so a target's line joins the tracked frames
+    # (as nulls, they broke it into fragments too short to see).
+    history, count = view.history, view.history.last_frame + 1
+    rows = tracked_rows(history, count, some)
+    assert set(recorded) <= set(rows) and set(dropped).isdisjoint(rows)
+    x, peaks, _line = chart_data(count, [history.signals["T1"]["peak_score"]], some, (0, 1), rows)
+    assert None not in [value for frame, value in zip(x, peaks, strict=True) if frame > frozen]
     controller.seek(dropped[-1])
     assert not controller.snapshot().drawings
     name, content = controller.export("mcap")  # the downloads are the live recording's
@@ -283,4 +291,21 @@ def test_the_live_source_is_shown_relative_to_its_allowed_folder(
         assert str(tmp_path) not in text, text
     assert "Live: media/flight.avi." in shown[0] and "**media/flight.avi**" in shown[1]
     assert "**media/flight.avi**" in shown[3]
+    controller.close()
+
+
+def test_live_boxes_json_refuses_to_stack_on_drawn_targets(tmp_path: Path, media: Path) -> None:
+    """As on a file: boxes.json adds a target per landmark, so once a box is drawn on the
+    frozen frame it is refused with the same message and adds nothing."""
+    controller, live = _live_tab(tmp_path)
+    live.open_source("flight.avi", str(DEMO_DIR / "scene.json"))
+    live.step()
+    live.freeze()
+    controller.place_box((100.0, 100.0, 40.0, 40.0))
+    assert list(controller.run.targets) == ["T1"]
+    with pytest.raises(InputError, match="delete the 1 drawn first"):
+        live.load_boxes_json()
+    assert list(controller.run.targets) == ["T1"]
+    assert live.state == FROZEN
+    live.halt()
     controller.close()
