@@ -32,8 +32,11 @@ class AppConfig:
     """The embedded demo."""
     tracker_preset: str = "autotrack"
     """Tracker preset of new runs (autotrack, strcf, strcf+asr, strcf+atr, autotrack+)."""
-    tracker_threads: int = 2
-    """Threads each multi-target tracker may use."""
+    tracker_threads: int | None = None
+    """Threads each multi-target tracker may use (None: see `tracker_concurrency`)."""
+    tracker_processes: int | None = None
+    """Processes each multi-target tracker spreads its targets over (None: see
+    `tracker_concurrency`)."""
     max_targets: int = 4
     """Most targets a tab may have at once (four landmarks with the demo's scene)."""
     canvas_fps: float = 5.0
@@ -49,6 +52,15 @@ class AppConfig:
     share_sessions: bool = False
     """List every browser's sessions and uploads to every tab (default: each browser sees its
     own and those the operator put in the sessions folder; app/owners.py)."""
+
+    @property
+    def tracker_concurrency(self) -> tuple[int, int]:
+        """(threads, processes) of each run's trackers: as chosen, else the library's default
+        for `max_targets` targets (one thread and two processes on two cores or more; a child
+        process starts only when a second target is drawn)."""
+        from autotrack.tracker.multi import chosen_concurrency
+
+        return chosen_concurrency(self.tracker_threads, self.tracker_processes, self.max_targets)
 
     @property
     def upload_dir(self) -> Path:

@@ -36,6 +36,7 @@ from autotrack.localization.scene import Scene, load_scene
 from autotrack.params import PRESETS, preset
 from autotrack.pipeline import Pipeline, Recording, TrackedTarget
 from autotrack.sessions import Session
+from autotrack.tracker.target_process import WorkerPool
 
 POSE_OPTIONS = {"refine_params": RefineParams(), "reacquire_params": ReacquireParams()}
 """With a scene, the pipeline gives the solver sub-pixel landmark points and re-acquires lost
@@ -50,6 +51,8 @@ class TabController(SessionCommands):
         roots: Folders this tab may open sequences, scenes and sessions' sources from.
         recordings: The server-wide registry of session files being written.
         tab_id: This tab's id in `recordings`.
+        worker_pool: The server-wide pool lending the trackers their child processes (None:
+            each run its own).
         on_visit: Called whenever the current frame changes while a command runs (each frame
             played or tracked through), so the display can follow.
     """
@@ -62,8 +65,10 @@ class TabController(SessionCommands):
         tab_id: int,
         on_visit: Callable[[], None] | None = None,
         space: BrowserSpace | None = None,
+        worker_pool: WorkerPool | None = None,
     ) -> None:
         self.config = config
+        self.worker_pool = worker_pool
         self.space = space or BrowserSpace(config.sessions_dir, config.upload_dir, None)
         """Where this tab's recordings and uploads go, and whose it may list."""
         self.roots = roots
@@ -202,8 +207,7 @@ class TabController(SessionCommands):
     ) -> Pipeline:
         """A run on `frames` with the chosen preset (or continuing `session` with its own), this
         server's tracker threads and pose options; the frames are closed when it fails."""
-        threads = self.config.tracker_threads
-        options = {"scene": scene, "recording": recording, "tracker_threads": threads}
+        options = {"scene": scene, "recording": recording, **self.tracker_options()}
         try:
             if session is None:
                 return Pipeline(frames, preset(self.preset_name), **options, **POSE_OPTIONS)
@@ -211,6 +215,15 @@ class TabController(SessionCommands):
         except Exception:
             frames.close()
             raise
+
+    def tracker_options(self) -> dict:
+        """The Pipeline's tracker threads, processes and worker pool for this server."""
+        threads, processes = self.config.tracker_concurrency
+        return {
+            "tracker_threads": threads,
+            "tracker_processes": processes,
+            "worker_pool": self.worker_pool,
+        }
 
     def _load(
         self, path: Path, scene_path: Path | None, *, scene_given: bool

@@ -157,7 +157,7 @@ class LiveControl:
             scene=self._scene,
             recording=recording,
             fps=self._reader().fps or DEFAULT_LIVE_FPS,
-            tracker_threads=controller.config.tracker_threads,
+            **controller.tracker_options(),
             **POSE_OPTIONS,
         )
         self.frames, self.run = frames, run

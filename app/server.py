@@ -20,6 +20,7 @@ from app.owners import BrowserSpace, browser_tag
 from app.recordings import RecordingRegistry
 from app.tab import Tab
 from app.uploads import UploadReceiver
+from autotrack.tracker.target_process import WorkerPool
 from autotrack.tracker.tracker import warm_up
 
 
@@ -31,6 +32,8 @@ class StudioServer:
         config.sessions_dir.mkdir(parents=True, exist_ok=True)
         self.roots = config.browsable_roots()
         self.recordings = RecordingRegistry()
+        self.worker_pool = WorkerPool()
+        """Tracking child processes lent to every tab's runs (started once per server)."""
         self.uploads = UploadReceiver(config.incoming_dir, config.upload_dir, config.upload_limits)
         self._lock = threading.Lock()
         self.tabs: dict[int, Tab] = {}
@@ -108,7 +111,17 @@ class StudioServer:
             shared=config.share_sessions,
         )
         roots = config.browsable_roots(space.upload_roots())
-        tab = Tab(config, roots, self.recordings, channel, gui, scene, tab_id=tab_id, space=space)
+        tab = Tab(
+            config,
+            roots,
+            self.recordings,
+            channel,
+            gui,
+            scene,
+            tab_id=tab_id,
+            space=space,
+            worker_pool=self.worker_pool,
+        )
         self.uploads.attach(
             gui, tab.panels.sequence.upload, tab_id, tab.receive_upload_file, tab.refuse_upload
         )
@@ -135,4 +148,5 @@ class StudioServer:
             self.tabs.clear()
         for tab in tabs:
             tab.close()
+        self.worker_pool.close()
         self.viser.stop()

@@ -42,6 +42,7 @@ from app.recordings import RecordingRegistry
 from app.view3d import DEFAULT_FOV
 from app.worker import Worker
 from autotrack.errors import InputError
+from autotrack.tracker.target_process import WorkerPool
 
 TABLE_PERIOD = 0.25
 """Seconds between Targets-table updates while frames change (playing, tracking ahead)."""
@@ -70,11 +71,18 @@ class Tab:
         *,
         tab_id: int,
         space: BrowserSpace | None = None,
+        worker_pool: WorkerPool | None = None,
     ) -> None:
         self.tab_id = tab_id
         self.channel = channel
         self.controller = TabController(
-            config, roots, recordings, tab_id, on_visit=self._frame_changed, space=space
+            config,
+            roots,
+            recordings,
+            tab_id,
+            on_visit=self._frame_changed,
+            space=space,
+            worker_pool=worker_pool,
         )
         self.panels = build_panels(gui, config)
         self.display = DisplayLoop(

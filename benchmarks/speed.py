@@ -31,8 +31,12 @@ import sys
 import tempfile
 import time
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
+
+if TYPE_CHECKING:
+    from autotrack.tracker.target_process import WorkerPool
 
 ROOT = Path(__file__).resolve().parents[1]
 SHARED = ROOT / ".." / "shared" / "data"
@@ -112,9 +116,11 @@ def render_multi_sequence(folder: Path, frames: int) -> Path:
     return render_sequence(folder / spec.name, spec)
 
 
-def multi_target_pose(sequence: Path, threads: int, processes: int = 1) -> dict:
+def multi_target_pose(
+    sequence: Path, threads: int, processes: int = 1, worker_pool: WorkerPool | None = None
+) -> dict:
     """Four targets + pose from the JPEG files: seconds per frame, decoding included, and the CPU
-    seconds per frame of this process and of its tracking children."""
+    seconds per frame of this process and of its tracking children (lent by `worker_pool`)."""
     import cv2
 
     from autotrack.io.frames import open_frames
@@ -130,14 +136,26 @@ def multi_target_pose(sequence: Path, threads: int, processes: int = 1) -> dict:
         # Warm-up: kernels loaded, files in the page cache, the children started (a closed
         # tracker gives them back for the next run, as an app or a second run would find them).
         first = [source.read(i) for i in range(3)]
-        list(localize_sequence(first, scene, boxes, params, processes=processes))
+        list(
+            localize_sequence(
+                first, scene, boxes, params, processes=processes, worker_pool=worker_pool
+            )
+        )
         for index in range(len(source)):
             source.read_bgr(index)
     with open_frames(sequence) as source:
         children_before = _children_cpu()
         start, cpu_start = time.perf_counter(), time.process_time()
         records = list(
-            localize_sequence(source, scene, boxes, params, threads=threads, processes=processes)
+            localize_sequence(
+                source,
+                scene,
+                boxes,
+                params,
+                threads=threads,
+                processes=processes,
+                worker_pool=worker_pool,
+            )
         )
         elapsed, cpu = time.perf_counter() - start, time.process_time() - cpu_start
         children = _children_cpu() - children_before
@@ -150,6 +168,27 @@ def multi_target_pose(sequence: Path, threads: int, processes: int = 1) -> dict:
         "frames": frames,
         "valid": valid,
     }
+
+
+def print_multi(
+    sequence: Path, threads: int, processes: int, pool: WorkerPool, default: bool
+) -> None:
+    """One line of section 2; `default`: this is what `autotrack localize` and the app choose
+    for four targets on this machine."""
+    multi = multi_target_pose(sequence, threads, processes, pool)
+    seconds = multi["seconds_per_frame"]
+    label = f"{threads} thread{'s' if threads > 1 else ''}" + (
+        f", {processes} processes" if processes > 1 else ""
+    )
+    cpu = f"CPU {multi['cpu_per_frame'] * 1e3:.1f} ms/frame"
+    if processes > 1:
+        cpu += f" here + {multi['children_cpu_per_frame'] * 1e3:.1f} in the child"
+    print(
+        f"  {label:<23}: {seconds * 1e3:6.1f} ms/frame = {1 / seconds:5.1f} frames/s "
+        f"({cpu}; {multi['valid']}/{multi['frames']} valid poses)"
+        + ("  <- the default" if default else ""),
+        flush=True,
+    )
 
 
 def _children_cpu() -> float:
@@ -278,20 +317,13 @@ def main() -> int:
             print(
                 f"\nfour targets + pose, {args.multi_frames} frames of 1280x720 JPEG, end to end:"
             )
-            for threads, processes in ((1, 1), (2, 1), (1, 2)):
-                multi = multi_target_pose(sequence, threads, processes)
-                seconds = multi["seconds_per_frame"]
-                label = f"{threads} thread{'s' if threads > 1 else ''}" + (
-                    f", {processes} processes" if processes > 1 else ""
-                )
-                cpu = f"CPU {multi['cpu_per_frame'] * 1e3:.1f} ms/frame"
-                if processes > 1:
-                    cpu += f" here + {multi['children_cpu_per_frame'] * 1e3:.1f} in the child"
-                print(
-                    f"  {label:<23}: {seconds * 1e3:6.1f} ms/frame = {1 / seconds:5.1f} frames/s "
-                    f"({cpu}; {multi['valid']}/{multi['frames']} valid poses)",
-                    flush=True,
-                )
+            from autotrack.tracker.multi import default_concurrency
+            from autotrack.tracker.target_process import WorkerPool
+
+            default = default_concurrency(4)
+            with WorkerPool() as pool:
+                for threads, processes in ((1, 1), (2, 1), (1, 2)):
+                    print_multi(sequence, threads, processes, pool, (threads, processes) == default)
 
     if not args.skip_startup:
         with tempfile.TemporaryDirectory() as cache:

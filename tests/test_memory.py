@@ -220,7 +220,7 @@ def test_memory_stays_flat_over_3000_frames_with_four_targets_in_the_app(tmp_pat
     images.mkdir()
     for index in range(SOAK_FRAMES):
         cv2.imwrite(str(images / f"{index + 1:05d}.jpg"), source.read_bgr(index))
-    config = AppConfig(sessions_dir=tmp_path / "sessions")  # two tracker threads, as served
+    config = AppConfig(sessions_dir=tmp_path / "sessions")  # the served default concurrency
     controller = TabController(config, (tmp_path,), RecordingRegistry(), 1)
     controller.open(images, None)
     run = controller.run

@@ -4,6 +4,7 @@ cause, children that stop with the tracker."""
 
 from __future__ import annotations
 
+import argparse
 import json
 
 import numpy as np
@@ -14,8 +15,9 @@ from autotrack.io.frames import open_frames
 from autotrack.localization.scene import load_scene
 from autotrack.params import preset
 from autotrack.pipeline import localize_sequence
+from autotrack.tracker import multi
 from autotrack.tracker.multi import MultiTracker
-from autotrack.tracker.target_process import WorkerError, stop_idle_processes
+from autotrack.tracker.target_process import WorkerError, WorkerPool
 from tests import test_localize, test_multi
 from tests.test_multi import run
 
@@ -84,7 +86,8 @@ def test_a_childs_input_error_reaches_the_caller_and_the_tracker_goes_on(landmar
 
 def test_a_lost_child_is_named_and_closed_trackers_lend_their_children(landmarks_sequence):
     frames, boxes, _ = landmarks_sequence
-    tracker = MultiTracker(preset("autotrack"), processes=2)
+    pool = WorkerPool()
+    tracker = MultiTracker(preset("autotrack"), processes=2, worker_pool=pool)
     tracker.init(frames[0], boxes)
     child = tracker._children[0]._process
     child.kill()
@@ -92,17 +95,34 @@ def test_a_lost_child_is_named_and_closed_trackers_lend_their_children(landmarks
     with pytest.raises(WorkerError, match=f"tracking process {child.pid}"):
         tracker.update(frames[1])
     tracker.close()
-    with MultiTracker(preset("autotrack"), processes=2) as first:
+    assert pool.idle == 0  # the dead child was not given back
+    with MultiTracker(preset("autotrack"), processes=2, worker_pool=pool) as first:
         first.init(frames[0], boxes)
         lent = first._children[0]
-    assert lent.pid != child.pid  # the dead child was not given back
-    with MultiTracker(preset("autotrack"), processes=2) as second:
-        assert second._children[0] is lent  # started once, reused
+    assert lent.pid != child.pid and pool.idle == 1
+    with MultiTracker(preset("autotrack"), processes=2, worker_pool=pool) as second:
         assert set(second.init(frames[0], boxes)) == set(boxes)
-    stop_idle_processes()
-    assert not lent.alive()
+        assert second._children[0] is lent  # started once, reused
+    pool.close()
+    assert not lent.alive() and pool.idle == 0
     with pytest.raises(InputError, match="processes must be at least 1"):
         MultiTracker(preset("autotrack"), processes=0)
+
+
+def test_a_child_starts_with_its_first_target_and_stops_with_a_tracker_of_its_own(
+    landmarks_sequence,
+):
+    frames, boxes, _ = landmarks_sequence
+    first, *others = boxes
+    with MultiTracker(preset("autotrack"), processes=2) as tracker:
+        tracker.init(frames[0], {first: boxes[first]})
+        tracker.update(frames[1])
+        assert tracker._children == [None]  # one target: tracked here, no child started
+        tracker.add_target(others[0], frames[1], boxes[others[0]])
+        child = tracker._children[0]
+        assert child is not None and child.alive()
+        assert set(tracker.update(frames[2])) == {first, others[0]}
+    assert not child.alive()  # the tracker's own pool stopped it
 
 
 def test_localisation_with_two_processes_gives_the_same_poses(short_sequence):
@@ -119,3 +139,31 @@ def test_localisation_with_two_processes_gives_the_same_poses(short_sequence):
             k: t.box for k, t in two.tracks.items()
         }
         assert one.pose.valid and np.array_equal(one.pose.position, two.pose.position)
+
+
+@pytest.mark.parametrize(
+    ("cores", "targets", "expected"),
+    [(2, 4, (1, 2)), (8, 2, (1, 2)), (1, 4, (2, 1)), (2, 1, (1, 1)), (1, 1, (1, 1))],
+)
+def test_several_targets_on_several_cores_default_to_two_processes(
+    monkeypatch, cores, targets, expected
+):
+    monkeypatch.setattr(multi, "available_cores", lambda: cores)
+    assert multi.default_concurrency(targets) == expected
+    assert multi.chosen_concurrency(None, None, targets) == expected
+    assert multi.chosen_concurrency(3, None, targets) == (3, 1)  # threads chosen: one process
+    assert multi.chosen_concurrency(None, 3, targets) == (1, 3)
+    assert multi.chosen_concurrency(None, 1, targets) == (2, 1)
+    assert multi.chosen_concurrency(2, 2, targets) == (2, 2)
+
+
+def test_the_app_and_localize_take_the_default(monkeypatch, tmp_path):
+    from app.config import AppConfig
+    from autotrack.cli.localize import _choose_concurrency
+
+    monkeypatch.setattr(multi, "available_cores", lambda: 2)
+    assert AppConfig(sessions_dir=tmp_path).tracker_concurrency == (1, 2)
+    assert AppConfig(sessions_dir=tmp_path, tracker_threads=2).tracker_concurrency == (2, 1)
+    args = argparse.Namespace(threads=None, processes=None)
+    _choose_concurrency(args, 4)
+    assert (args.threads, args.processes) == (1, 2)

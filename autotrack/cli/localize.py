@@ -106,16 +106,17 @@ def _add_concurrency_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--threads",
         type=int,
-        default=2,
-        help="track the landmarks on this many threads "
-        "(default 2; docs/benchmarks.md has the frame rates for 1 and 2 threads)",
+        default=None,
+        help="track the landmarks on this many threads (default 1 with several processes, "
+        "else 2; docs/benchmarks.md has the frame rates)",
     )
     parser.add_argument(
         "--processes",
         type=int,
-        default=1,
+        default=None,
         help="spread the landmarks over this many processes (this one and N-1 children: "
-        "parallel where threads share Python's lock; see docs/benchmarks.md, Speed)",
+        "parallel where threads share Python's lock; default 2 for two landmarks or more on "
+        "two cores or more, else 1; see docs/benchmarks.md, Speed)",
     )
 
 
@@ -172,14 +173,21 @@ def _check_arguments(args: argparse.Namespace) -> None:
     check_output_file(args.session, "--session", force=False)
     finite(args.fps, "--fps", low=0)
     finite(args.max_rms, "--max-rms", low=0)
-    if args.threads < 1:
+    if args.threads is not None and args.threads < 1:
         raise InputError("--threads must be at least 1")
-    if args.processes < 1:
+    if args.processes is not None and args.processes < 1:
         raise InputError("--processes must be at least 1")
     if not args.no_reacquire and args.no_refine:
         raise InputError("re-acquisition needs the refiner's templates: add --no-reacquire")
     if args.smooth_lag < 0:
         raise InputError("--smooth-lag must be 0 or more")
+
+
+def _choose_concurrency(args: argparse.Namespace, target_count: int) -> None:
+    """--threads and --processes where not given (`chosen_concurrency`)."""
+    from autotrack.tracker.multi import chosen_concurrency
+
+    args.threads, args.processes = chosen_concurrency(args.threads, args.processes, target_count)
 
 
 def run_localize(args: argparse.Namespace) -> int:
@@ -198,6 +206,7 @@ def run_localize(args: argparse.Namespace) -> int:
     for warning in scene_warnings(scene):
         print(f"autotrack: warning: {warning}", file=sys.stderr)
     init = read_boxes_json(_default_file(args.init, args.sequence, "boxes.json", "--init"))
+    _choose_concurrency(args, len(init))
     localizer_params = LocalizerParams()
     if args.max_rms is not None:
         localizer_params = replace(localizer_params, max_rms_error_px=args.max_rms)

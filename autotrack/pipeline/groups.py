@@ -18,6 +18,7 @@ import numpy as np
 from autotrack.params import TrackerParams
 from autotrack.result import TrackResult
 from autotrack.tracker.multi import MultiTracker
+from autotrack.tracker.target_process import WorkerPool
 
 Box = tuple[float, float, float, float]
 
@@ -32,10 +33,20 @@ class _Group:
 class TrackerGroups:
     """The MultiTrackers of one pipeline; results carry the sequence's frame index."""
 
-    def __init__(self, params: TrackerParams, threads: int, processes: int = 1) -> None:
+    def __init__(
+        self,
+        params: TrackerParams,
+        threads: int,
+        processes: int = 1,
+        worker_pool: WorkerPool | None = None,
+    ) -> None:
+        """`worker_pool` lends the MultiTrackers their child processes (None with `processes`
+        > 1: a pool of the groups' own, closed with them)."""
         self.params = params
         self.threads = threads
         self.processes = processes
+        self._own_pool = worker_pool is None and processes > 1
+        self._worker_pool = WorkerPool() if self._own_pool else worker_pool
         self._groups: list[_Group] = []
 
     @property
@@ -66,7 +77,11 @@ class TrackerGroups:
                 fresh[target_id] = box
         if fresh:
             tracker = MultiTracker(
-                self.params, list(fresh), threads=self.threads, processes=self.processes
+                self.params,
+                list(fresh),
+                threads=self.threads,
+                processes=self.processes,
+                worker_pool=self._worker_pool,
             )
             try:
                 results.update(tracker.init(frame, fresh))
@@ -112,6 +127,8 @@ class TrackerGroups:
         for group in self._groups:
             group.tracker.close()
         self._groups.clear()
+        if self._own_pool and self._worker_pool is not None:
+            self._worker_pool.close()
 
     def _group_of(self, target_id: str) -> _Group | None:
         return next((group for group in self._groups if target_id in group.target_ids), None)

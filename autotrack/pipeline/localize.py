@@ -16,6 +16,7 @@ from autotrack.params import TrackerParams
 from autotrack.pipeline.pipeline import Pipeline
 from autotrack.pipeline.recording import Recording
 from autotrack.pipeline.targets import FrameOutcome
+from autotrack.tracker.target_process import WorkerPool
 
 Box = tuple[float, float, float, float]
 
@@ -31,6 +32,7 @@ def localize_sequence(
     fps: float | None = None,
     threads: int = 1,
     processes: int = 1,
+    worker_pool: WorkerPool | None = None,
     refine_params: RefineParams | None = None,
     reacquire_params: ReacquireParams | None = None,
     map_window: int = 1,
@@ -44,7 +46,8 @@ def localize_sequence(
     (`localization.refine`), `reacquire_params` the out-of-view gate and re-acquisition of lost
     landmarks (`localization.reacquire`; it uses the refiner's templates, so it turns refinement
     on with default settings if needed). `threads` and `processes` run the landmarks'
-    trackers concurrently (the Pipeline's `tracker_threads`, `tracker_processes`).
+    trackers concurrently (the Pipeline's `tracker_threads`, `tracker_processes`; `worker_pool`
+    lends the child processes, None: the run's own).
     `map_window` (the Pipeline's): 1 keeps the maps of
     the frame yielded only, 0 none.
     """
@@ -60,6 +63,7 @@ def localize_sequence(
         fps=fps,
         tracker_threads=threads,
         tracker_processes=processes,
+        worker_pool=worker_pool,
         refine_params=refine_params,
         reacquire_params=reacquire_params,
         map_window=map_window,

@@ -7,8 +7,8 @@ benchmark scripts and the app all drive this one class.
 
 Targets are named "T1", "T2", ... in the order they are added, whatever the caller (a deleted
 target's number is given to the next new one, so ids stay T1..Tn); a target that localises a
-scene landmark carries its id (`landmark_id`). Editing a box at an earlier
-frame re-tracks only that target from there; the other targets keep their results and filters.
+scene landmark carries its id (`landmark_id`). Editing a box at an earlier frame re-tracks
+only that target from there; the other targets keep their results and filters.
 """
 
 from __future__ import annotations
@@ -43,6 +43,7 @@ from autotrack.result import PoseEstimate, TrackResult
 from autotrack.sessions import Session, SessionRecorder
 from autotrack.sessions.maps import FrameMaps, SessionMaps
 from autotrack.sessions.messages import landmark_positions
+from autotrack.tracker.target_process import WorkerPool
 from autotrack.tracker.tracker import validate_box
 
 Box = tuple[float, float, float, float]
@@ -64,7 +65,8 @@ class Pipeline:
         recording: Where to record the session (None: not recorded).
         fps: Frame rate of the log times (None: the frames' own, else the recorder's default).
         tracker_threads: Threads each MultiTracker may use for its targets.
-        tracker_processes: Processes each MultiTracker spreads its targets over (`MultiTracker`).
+        tracker_processes, worker_pool: Processes each MultiTracker spreads its targets over,
+            and the pool lending it the child processes (`MultiTracker`; None: its own).
         refine_params: Sub-pixel landmark points (`localization.refine`; None: box centres).
         reacquire_params: Out-of-view gate and re-acquisition of lost landmarks
             (`localization.reacquire`; None: off). Both need a scene.
@@ -84,6 +86,7 @@ class Pipeline:
         fps: float | None = None,
         tracker_threads: int = 1,
         tracker_processes: int = 1,
+        worker_pool: WorkerPool | None = None,
         refine_params: RefineParams | None = None,
         reacquire_params: ReacquireParams | None = None,
         map_window: int = MAP_WINDOW,
@@ -108,7 +111,7 @@ class Pipeline:
         self.resumed_from: Path | None = None
         self.resume_frame = 0
         """After `resume`: the frame tracking continues from."""
-        self._groups = TrackerGroups(params, tracker_threads, tracker_processes)
+        self._groups = TrackerGroups(params, tracker_threads, tracker_processes, worker_pool)
         self._posing = (
             None
             if scene is None
@@ -234,10 +237,8 @@ class Pipeline:
     def add_target(
         self, frame_index: int, box: Box, landmark_id: str | None | EllipsisType = ...
     ) -> str:
-        """A new target with its box on frame `frame_index`; returns its id.
-
-        `landmark_id=...` (the default) assigns the first free scene landmark.
-        """
+        """A new target with its box on frame `frame_index`; returns its id. `landmark_id=...`
+        (the default) assigns the first free scene landmark."""
         if landmark_id is ...:
             free = self.free_landmarks()
             landmark_id = free[0] if free else None

@@ -179,11 +179,45 @@ def _area_samples(image, tops, lefts, heights, widths, out):
 
 
 @njit(cache=True, nogil=True, fastmath=False, error_model="numpy")
+def _padded_row_taps(x_src, x_weight, x_offsets, left, width, channels):
+    """The horizontal taps of every output element of a row, padded to one count.
+
+    Tap j of output element i (= dx * channels + c) reads element `index[j, i]` of the source
+    row's span `[start, stop)` (flattened row, channels interleaved, columns clamped into the
+    image) with weight `weight[j, i]`. Elements with fewer taps get weight 0 on a pixel of their
+    own: the float32 sum then adds +0, which leaves it as it is (every sum is >= +0).
+    """
+    dst_w = x_offsets.shape[0] - 1
+    taps = 0
+    for dx in range(dst_w):
+        taps = max(taps, x_offsets[dx + 1] - x_offsets[dx])
+    index = np.empty((taps, dst_w * channels), np.int32)
+    weight = np.zeros((taps, dst_w * channels), np.float32)
+    for dx in range(dst_w):
+        first, last = x_offsets[dx], x_offsets[dx + 1]
+        for j in range(taps):
+            k = min(first + j, last - 1)
+            column = min(max(left + x_src[k], 0), width - 1)
+            for c in range(channels):
+                index[j, dx * channels + c] = column * channels + c
+                if first + j < last:
+                    weight[j, dx * channels + c] = x_weight[k]
+    start = index.min()
+    stop = index.max() + 1
+    for j in range(taps):
+        for i in range(dst_w * channels):
+            index[j, i] -= start
+    return index, weight, start, stop
+
+
+@njit(cache=True, nogil=True, fastmath=False, error_model="numpy")
 def _area_crop(image, top, left, src_h, src_w, out):
     """One large crop: ResizeArea_Invoker in the image's own (row, col, channel) layout.
 
     Each source row's horizontal sums are computed once (OpenCV recomputes a row shared by two
-    output rows, with the same result); the vertical pass then runs vectorised along the row.
+    output rows, with the same result), tap by tap over the whole output row so the compiler
+    vectorises them (gathers from the row converted to float32 once); the vertical pass then
+    runs vectorised along the row.
     """
     height, width, channels = image.shape
     dst_h, dst_w = out.shape[0], out.shape[1]
@@ -195,41 +229,23 @@ def _area_crop(image, top, left, src_h, src_w, out):
     y_offsets = np.empty(dst_h + 1, np.int64)
     _area_taps(src_w, dst_w, x_src, x_weight, x_offsets)
     _area_taps(src_h, dst_h, y_src, y_weight, y_offsets)
-    n_x = x_offsets[dst_w]
-    columns = np.empty(n_x, np.int64)
-    for k in range(n_x):
-        columns[k] = min(max(left + x_src[k], 0), width - 1)
+    index, weight, start, stop = _padded_row_taps(x_src, x_weight, x_offsets, left, width, channels)
     row_width = dst_w * channels
     horizontal = np.empty((src_h, row_width), np.float32)
     flat = image.reshape(height, width * channels)
-    for k in range(n_x):
-        columns[k] *= channels  # offsets into a flattened row
+    span = np.empty(stop - start, np.float32)
     for r in range(src_h):
-        line = flat[min(max(top + r, 0), height - 1)]
+        pixels = flat[min(max(top + r, 0), height - 1)][start:stop]
+        for q in range(stop - start):
+            span[q] = np.float32(pixels[q])
         target = horizontal[r]
-        if channels == 3:  # the common case, three independent sums in registers
-            for dx in range(dst_w):
-                first, last = x_offsets[dx], x_offsets[dx + 1]
-                p, alpha = columns[first], x_weight[first]
-                a0 = np.float32(line[p]) * alpha
-                a1 = np.float32(line[p + 1]) * alpha
-                a2 = np.float32(line[p + 2]) * alpha
-                for k in range(first + 1, last):
-                    p, alpha = columns[k], x_weight[k]
-                    a0 = a0 + np.float32(line[p]) * alpha
-                    a1 = a1 + np.float32(line[p + 1]) * alpha
-                    a2 = a2 + np.float32(line[p + 2]) * alpha
-                target[3 * dx] = a0
-                target[3 * dx + 1] = a1
-                target[3 * dx + 2] = a2
-        else:
-            for dx in range(dst_w):
-                first, last = x_offsets[dx], x_offsets[dx + 1]
-                for c in range(channels):
-                    acc = np.float32(line[columns[first] + c]) * x_weight[first]
-                    for k in range(first + 1, last):
-                        acc = acc + np.float32(line[columns[k] + c]) * x_weight[k]
-                    target[dx * channels + c] = acc
+        first_index, first_weight = index[0], weight[0]
+        for i in range(row_width):
+            target[i] = span[first_index[i]] * first_weight[i]
+        for j in range(1, index.shape[0]):
+            tap_index, tap_weight = index[j], weight[j]
+            for i in range(row_width):
+                target[i] = target[i] + span[tap_index[i]] * tap_weight[i]
     total = np.empty(row_width, np.float32)
     for dy in range(dst_h):
         first = y_offsets[dy]

@@ -21,7 +21,7 @@ import numpy as np
 from autotrack.errors import InputError
 from autotrack.params import TrackerParams
 from autotrack.result import TrackResult
-from autotrack.tracker.target_process import SharedFrame, acquire_process, release_process
+from autotrack.tracker.target_process import SharedFrame, TargetProcess, WorkerPool
 from autotrack.tracker.tracker import AutoTrack
 
 Box = Sequence[float]
@@ -37,10 +37,13 @@ class MultiTracker:
         threads: int = 1,
         colour_table: np.ndarray | None = None,
         processes: int = 1,
+        worker_pool: WorkerPool | None = None,
     ) -> None:
         """`target_ids` fixes the targets `init` expects (empty: whatever `init` is given);
         `threads` > 1 runs this process's targets concurrently; `processes` > 1 spreads the
-        targets over this process and `processes - 1` child processes."""
+        targets over this process and up to `processes - 1` child processes, each taken from
+        `worker_pool` (None: a pool of this tracker's own, closed with it) when a target is
+        first given to it."""
         if threads < 1:
             raise InputError(f"threads must be at least 1, got {threads}")
         if processes < 1:
@@ -56,7 +59,9 @@ class MultiTracker:
         self._owners: dict[str, int] = {}  # every target: 0 here, i > 0 the i-th child
         self._frame_index = -1
         self._pool = ThreadPoolExecutor(max_workers=threads) if threads > 1 else None
-        self._children = [acquire_process(params, colour_table) for _ in range(processes - 1)]
+        self._own_pool = worker_pool is None and processes > 1
+        self._worker_pool = WorkerPool() if self._own_pool else worker_pool
+        self._children: list[TargetProcess | None] = [None] * (processes - 1)
         self._shared_frame = SharedFrame() if self._children else None
 
     @property
@@ -96,7 +101,7 @@ class MultiTracker:
         handle = self._publish(frame)
         for target_id, box in starts.items():
             if self._owners[target_id] > 0:
-                self._children[self._owners[target_id] - 1].start(target_id, handle, box)
+                self._child(self._owners[target_id]).start(target_id, handle, box)
         return self._run(lambda target_id, tracker: tracker.init(frame, starts[target_id]))
 
     def update(self, frame: np.ndarray) -> dict[str, TrackResult]:
@@ -108,7 +113,7 @@ class MultiTracker:
         handle = self._publish(frame)
         for index, child in enumerate(self._children, start=1):
             target_ids = [k for k, owner in self._owners.items() if owner == index]
-            if target_ids:
+            if target_ids and child is not None:
                 child.update(target_ids, handle)
         return self._run(lambda _target_id, tracker: tracker.update(frame))
 
@@ -137,11 +142,14 @@ class MultiTracker:
             self._pool.shutdown(wait=True)
             self._pool = None
         for child in self._children:
-            release_process(child)
+            if child is not None and self._worker_pool is not None:
+                self._worker_pool.release(child)
         self._children = []
         if self._shared_frame is not None:
             self._shared_frame.close()
             self._shared_frame = None
+        if self._own_pool and self._worker_pool is not None:
+            self._worker_pool.close()
 
     def __enter__(self) -> MultiTracker:
         return self
@@ -166,9 +174,9 @@ class MultiTracker:
             result = tracker.init(frame, tuple(box))
             self._trackers[target_id] = tracker
         else:
-            child = self._children[owner - 1]
-            child.start(target_id, self._publish(frame), tuple(box))
-            result = child.collect()[target_id]
+            child = self._child(owner)
+            child.start(target_id, self._publish(frame, always=True), tuple(box))
+            result = _answers(child)[target_id]
         self._owners[target_id] = owner
         return replace(result, frame_index=self._frame_index)
 
@@ -177,8 +185,8 @@ class MultiTracker:
         if owner == 0:
             del self._trackers[target_id]
         else:
-            self._children[owner - 1].remove(target_id)
-            self._children[owner - 1].collect()
+            self._child(owner).remove(target_id)
+            _answers(self._child(owner))
 
     def _least_loaded_owner(self) -> int:
         """This process (0) or the child (1, 2, ...) with the fewest targets, first on ties."""
@@ -187,9 +195,24 @@ class MultiTracker:
             counts[owner] += 1
         return counts.index(min(counts))
 
-    def _publish(self, frame: np.ndarray) -> tuple | None:
-        """The frame in shared memory for the children (None without children)."""
-        return None if self._shared_frame is None else self._shared_frame.write(frame)
+    def _child(self, owner: int) -> TargetProcess:
+        """The child process `owner` (1, 2, ...), taken from the pool on first use."""
+        child = self._children[owner - 1]
+        if child is None:
+            if self._worker_pool is None:
+                raise InputError("this tracker is closed")
+            child = self._worker_pool.acquire(self.params, self.colour_table)
+            self._children[owner - 1] = child
+        return child
+
+    def _publish(self, frame: np.ndarray, *, always: bool = False) -> tuple | None:
+        """The frame in shared memory for the children (None without children, or when no
+        child tracks a target and not `always`)."""
+        if self._shared_frame is None:
+            return None
+        if not always and not any(owner > 0 for owner in self._owners.values()):
+            return None
+        return self._shared_frame.write(frame)
 
     def _run(self, step: Callable[[str, AutoTrack], TrackResult]) -> dict[str, TrackResult]:
         """Apply `step` to every (target id, tracker) of this process, concurrently when there
@@ -215,7 +238,7 @@ class MultiTracker:
         results: dict[str, TrackResult] = {}
         error: Exception | None = None
         for child in self._children:
-            while child.pending:
+            while child is not None and child.pending:
                 try:
                     results.update(child.collect())
                 except Exception as failure:
@@ -223,6 +246,47 @@ class MultiTracker:
         if error is not None:
             raise error
         return results
+
+
+def available_cores() -> int:
+    """Cores this process may run on (its CPU affinity where the system tells it)."""
+    if hasattr(os, "sched_getaffinity"):
+        return len(os.sched_getaffinity(0))
+    return os.cpu_count() or 1
+
+
+def default_concurrency(target_count: int) -> tuple[int, int]:
+    """(threads, processes) for `target_count` targets, as `autotrack localize` and the app
+    choose them: with two targets or more, two cores or more and a POSIX system, one thread and
+    two processes (half the targets in a child: parallel where threads share the GIL, and the
+    results are those of one process bit for bit); else two threads for several targets
+    (measured in docs/benchmarks.md, Speed) and one for a single target."""
+    if target_count >= 2 and available_cores() >= 2 and os.name == "posix":
+        return 1, 2
+    return (2 if target_count >= 2 else 1), 1
+
+
+def chosen_concurrency(
+    threads: int | None, processes: int | None, target_count: int
+) -> tuple[int, int]:
+    """(threads, processes) from a caller's choice, None where it made none: both None,
+    `default_concurrency`; threads alone, all the targets in this process; processes alone, one
+    thread per process when several, else two."""
+    if threads is None and processes is None:
+        return default_concurrency(target_count)
+    if processes is None:
+        return int(threads or 1), 1
+    if threads is None:
+        return (1 if processes > 1 else 2), processes
+    return threads, processes
+
+
+def _answers(child: TargetProcess) -> dict[str, TrackResult]:
+    """Every answer `child` owes (a child just taken from its pool owes one for its settings)."""
+    results: dict[str, TrackResult] = {}
+    while child.pending:
+        results.update(child.collect())
+    return results
 
 
 def _shared_frame(frame: np.ndarray) -> np.ndarray:

@@ -13,13 +13,12 @@ A child is a fresh interpreter (`python -c ...`, talking over a socket pair), ne
 `multiprocessing` spawn (which re-runs the caller's main script, unguarded in most scripts).
 It imports the tracker and loads the cached numba kernels once (~1 s on an idle machine, in
 the background while the parent goes on) and uses as many OpenCV threads as the parent. A
-closed MultiTracker gives its children back (`release_process`): the next one
-(`acquire_process`) starts at once, with no start-up to pay again.
+`WorkerPool` lends children to MultiTrackers: a closed MultiTracker gives its children back and
+the next one of the same pool starts at once, with no start-up to pay again.
 """
 
 from __future__ import annotations
 
-import atexit
 import contextlib
 import os
 import socket
@@ -248,51 +247,72 @@ def _picklable(error: Exception) -> Exception:
 
 
 IDLE_LIMIT = 4
-"""Idle children kept for the next MultiTracker (a child's start-up is paid once)."""
-_idle: list[TargetProcess] = []
-_idle_lock = threading.Lock()
+"""Idle children a `WorkerPool` keeps for the next MultiTracker (a child's start-up is paid
+once)."""
 
 
-def acquire_process(params: TrackerParams, colour_table: np.ndarray | None) -> TargetProcess:
-    """An idle child if there is one (already started, kernels loaded), else a new one, set to
-    track with `params`."""
-    with _idle_lock:
-        while _idle:
-            child = _idle.pop()
-            if child.alive():
-                break
-            child.close()
-        else:
-            child = TargetProcess()
-    child.configure(params, colour_table)
-    return child
+class WorkerPool:
+    """Child processes lent to MultiTrackers: a closed MultiTracker gives its children back,
+    the next one takes them already started (imports done, kernels loaded).
 
+    One pool per owner that runs MultiTrackers one after another or side by side (a pipeline,
+    the app's server, a benchmark); `close` stops the idle children, and a child still lent
+    out stops when it is given back to a closed pool.
+    """
 
-def release_process(child: TargetProcess) -> None:
-    """Give a child back: its trackers are dropped and it waits for the next MultiTracker (or
-    it is stopped, when it failed or enough children wait already)."""
-    try:
-        while child.pending:
+    def __init__(self, idle_limit: int = IDLE_LIMIT) -> None:
+        self.idle_limit = idle_limit
+        self._idle: list[TargetProcess] = []
+        self._lock = threading.Lock()
+        self._closed = False
+
+    def acquire(self, params: TrackerParams, colour_table: np.ndarray | None) -> TargetProcess:
+        """An idle child if there is one, else a new one, set to track with `params`."""
+        with self._lock:
+            while self._idle:
+                child = self._idle.pop()
+                if child.alive():
+                    break
+                child.close()
+            else:
+                child = TargetProcess()
+        child.configure(params, colour_table)
+        return child
+
+    def release(self, child: TargetProcess) -> None:
+        """Give a child back: its trackers are dropped and it waits for the next MultiTracker
+        (or it is stopped, when it failed, the pool is closed or enough children wait)."""
+        try:
+            while child.pending:
+                child.collect()
+            child.configure(TrackerParams(), None)  # drops the trackers
             child.collect()
-        child.configure(TrackerParams(), None)  # drops the trackers
-        child.collect()
-    except Exception:
-        child.close()
-        return
-    with _idle_lock:
-        if len(_idle) < IDLE_LIMIT:
-            _idle.append(child)
+        except Exception:
+            child.close()
             return
-    child.close()
-
-
-def stop_idle_processes() -> None:
-    """Stop every idle child (at exit; the children also stop when this process goes away)."""
-    with _idle_lock:
-        children = list(_idle)
-        _idle.clear()
-    for child in children:
+        with self._lock:
+            if not self._closed and len(self._idle) < self.idle_limit:
+                self._idle.append(child)
+                return
         child.close()
 
+    @property
+    def idle(self) -> int:
+        """Children waiting to be lent."""
+        with self._lock:
+            return len(self._idle)
 
-atexit.register(stop_idle_processes)
+    def close(self) -> None:
+        """Stop every idle child; children given back later are stopped too."""
+        with self._lock:
+            children = list(self._idle)
+            self._idle.clear()
+            self._closed = True
+        for child in children:
+            child.close()
+
+    def __enter__(self) -> WorkerPool:
+        return self
+
+    def __exit__(self, *exc_info: object) -> None:
+        self.close()

@@ -1,0 +1,140 @@
+"""Interleaved A/B of the tracker: this checkout against a git revision, in one process.
+
+The revision's `autotrack/` is extracted into a temporary folder and imported under another
+name, so both versions track the same frames in the same process, one update each in
+alternating order, frame by frame: a busy machine slows both alike. Prints, per sequence, the
+CPU time (`time.process_time`) per update of each, their ratio, and whether every box and
+response map is identical (the faithful preset must stay bit for bit).
+
+python benchmarks/ab_tracker.py integration3
+python benchmarks/ab_tracker.py HEAD~1 --frames 100 --preset autotrack+
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import io
+import os
+import re
+import subprocess
+import sys
+import tarfile
+import tempfile
+import time
+from pathlib import Path
+
+import cv2
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+SHARED = ROOT / ".." / "shared" / "data"
+COLOUR_TABLE = SHARED / "color_names" / "cn_norm_32768x10.npy"
+SEQUENCES = (
+    ("DTB70", "Surfing06"),
+    ("UAV123_10fps", "boat5"),
+    ("OTB", "Crossing"),
+    ("DTB70", "Animal3"),
+    ("UAVDT", "S1301"),
+    ("DTB70", "Gull1"),
+)
+"""Small and large targets, grey and colour frames."""
+BASE_PACKAGE = "autotrack_base"
+
+
+def extract_revision(revision: str, folder: Path) -> None:
+    """`autotrack/` of `revision` as the package `autotrack_base` in `folder`."""
+    archive = subprocess.run(
+        ["git", "-C", str(ROOT), "archive", revision, "autotrack"],
+        check=True,
+        capture_output=True,
+    ).stdout
+    with tarfile.open(fileobj=io.BytesIO(archive)) as tar:
+        tar.extractall(folder, filter="data")
+    package = folder / BASE_PACKAGE
+    (folder / "autotrack").rename(package)
+    pattern = re.compile(r"\b(from|import) autotrack\b|\"autotrack\.")
+    for path in package.rglob("*.py"):
+        text = path.read_text()
+        renamed = pattern.sub(lambda m: m.group(0).replace("autotrack", BASE_PACKAGE), text)
+        path.write_text(renamed)
+
+
+def compare(base, new, sequence_dir: Path, preset_name: str, frames: int) -> tuple:
+    """(base ms, new ms, identical, updates) on one sequence."""
+    from autotrack.evaluation.datasets import load_otb_sequence
+    from autotrack.io.frames import read_image
+
+    sequence = load_otb_sequence(sequence_dir)[0]
+    images = [read_image(path) for path in sequence.frame_paths[: frames + 1]]
+    trackers = [
+        module.AutoTrack(module.preset(preset_name, str(COLOUR_TABLE))) for module in (base, new)
+    ]
+    for tracker in trackers:
+        tracker.init(images[0], sequence.init_box)
+    spent = [0.0, 0.0]
+    identical = True
+    for index, image in enumerate(images[1:]):
+        results = [None, None]
+        for which in (0, 1) if index % 2 == 0 else (1, 0):
+            start = time.process_time()
+            results[which] = trackers[which].update(image)
+            spent[which] += time.process_time() - start
+        identical &= tuple(results[0].box) == tuple(results[1].box) and np.array_equal(
+            results[0].response_map, results[1].response_map
+        )
+    updates = len(images) - 1
+    return spent[0] / updates * 1e3, spent[1] / updates * 1e3, identical, updates
+
+
+def main() -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("revision", help="git revision to compare with (e.g. integration3)")
+    parser.add_argument("--frames", type=int, default=150, help="updates per sequence")
+    parser.add_argument("--preset", default="autotrack")
+    args = parser.parse_args()
+    if not COLOUR_TABLE.is_file():
+        print(f"needs {COLOUR_TABLE}", file=sys.stderr)
+        return 2
+    cv2.setNumThreads(1)
+    import autotrack as new
+
+    with tempfile.TemporaryDirectory() as folder:
+        try:
+            extract_revision(args.revision, Path(folder))
+        except subprocess.CalledProcessError as error:
+            print(f"cannot read {args.revision}: {error.stderr.decode().strip()}", file=sys.stderr)
+            return 2
+        sys.path.insert(0, folder)
+        base = importlib.import_module(BASE_PACKAGE)
+        load = os.getloadavg()
+        print(f"load average before: {load[0]:.1f} {load[1]:.1f} {load[2]:.1f}")
+        totals = [0.0, 0.0, 0]
+        for dataset, name in SEQUENCES:
+            sequence_dir = SHARED / "sequences" / dataset / name
+            if not sequence_dir.is_dir():
+                continue
+            base_ms, new_ms, identical, updates = compare(
+                base, new, sequence_dir, args.preset, args.frames
+            )
+            print(
+                f"  {name:<14} {args.revision} {base_ms:6.3f} ms  this {new_ms:6.3f} ms  "
+                f"ratio {base_ms / new_ms:.3f}  {'identical' if identical else 'DIFFERENT'}",
+                flush=True,
+            )
+            totals = [
+                totals[0] + base_ms * updates,
+                totals[1] + new_ms * updates,
+                totals[2] + updates,
+            ]
+    base_ms, new_ms, updates = totals[0] / totals[2], totals[1] / totals[2], totals[2]
+    load = os.getloadavg()
+    print(
+        f"all {updates} updates: {args.revision} {base_ms:.3f} ms, this {new_ms:.3f} ms per update "
+        f"({base_ms / new_ms:.3f}x); load average after: {load[0]:.1f}"
+    )
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
