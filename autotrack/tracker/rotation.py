@@ -80,8 +80,11 @@ def upright_view(
     """A `side` x `side` view of the image around the 1-based `position`, rotated so the target
     is upright, and the position's 1-based (row, col) in it: what the scale filter samples."""
     centre = side // 2  # 0-based index of `position` in the view, as crop_replicate centres
-    source_centre = (float(position[1]) - 1.0, float(position[0]) - 1.0)
-    view = _warp(image, _inverse_map(angle_deg, source_centre, (centre, centre)), (side, side))
+    # Turned about the point half a pixel past the position's pixel: the centre of an even-sized
+    # crop around it (sampling.crop_replicate), about which rotated_search_patch turns too.
+    source_centre = (float(position[1]) - 0.5, float(position[0]) - 0.5)
+    matrix = _inverse_map(angle_deg, source_centre, (centre + 0.5, centre + 0.5))
+    view = _warp(image, matrix, (side, side))
     return view, np.array([centre + 1.0, centre + 1.0])
 
 
