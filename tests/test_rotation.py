@@ -26,8 +26,8 @@ def _textured_image(seed: int = 3) -> np.ndarray:
 def test_rotated_patch_at_zero_is_the_search_patch():
     image = _textured_image().astype(np.uint8)
     plain = search_patch(image, (120.0, 160.0), (150, 150), (100, 100))
-    turned = rotation.rotated_search_patch(image, (120.0, 160.0), (150, 150), (100, 100), 0.0)
-    np.testing.assert_array_equal(plain, turned)
+    turned = rotation.rotated_search_patches(image, (120.0, 160.0), (150, 150), (100, 100), (0.0,))
+    np.testing.assert_array_equal(plain, turned[0])
 
 
 @pytest.mark.parametrize("angle", [25.0, -60.0, 135.0])
@@ -38,8 +38,9 @@ def test_rotated_patch_undoes_a_turn_of_the_image(angle):
     turn = cv2.getRotationMatrix2D(centre_xy, angle, 1.0)  # counter-clockwise as displayed
     turned_image = cv2.warpAffine(image, turn, (320, 240), borderMode=cv2.BORDER_REPLICATE)
     upright = search_patch(image, (120.0, 160.0), (90, 90), (90, 90))
-    found = rotation.rotated_search_patch(turned_image, (120.0, 160.0), (90, 90), (90, 90), angle)
-    wrong = rotation.rotated_search_patch(turned_image, (120.0, 160.0), (90, 90), (90, 90), -angle)
+    found, wrong = rotation.rotated_search_patches(
+        turned_image, (120.0, 160.0), (90, 90), (90, 90), (angle, -angle)
+    )
     inner = (slice(10, 80), slice(10, 80))
     error = np.mean(np.abs(found[inner] - upright[inner]))
     assert error < 2.0

@@ -48,30 +48,38 @@ def _warp(source: np.ndarray, matrix: np.ndarray, size_hw: tuple[int, int]) -> n
     )
 
 
-def rotated_search_patch(
+def rotated_search_patches(
     image: np.ndarray,
     position: tuple[float, float],
     region_size_hw: tuple[int, int],
     output_size_hw: tuple[int, int],
-    angle_deg: float,
-) -> np.ndarray:
-    """`sampling.search_patch` in the frame rotated by `angle_deg` (the same patch at 0).
+    angles_deg: tuple[float, ...],
+) -> list[np.ndarray]:
+    """`sampling.search_patch` in the frame rotated by each angle (the same patch at 0).
 
-    The search region is first resampled (area averaging, as the release) with a margin that
-    covers its rotated corners, then rotated at the patch's resolution, which costs one warp
-    of a patch of ~2x the output's area instead of one at the image's resolution.
+    The search region is resampled once (area averaging, as the release) with a margin that
+    covers its rotated corners, then rotated at the patch's resolution for each angle: one
+    area resampling of ~2x the output's area and one small warp per angle, instead of a warp
+    at the image's resolution.
     """
-    if angle_deg == 0.0:
-        return search_patch(image, position, region_size_hw, output_size_hw)
     rows, cols = int(output_size_hw[0]), int(output_size_hw[1])
     margin = math.ceil(max(rows, cols) * (math.sqrt(2.0) - 1.0) / 2.0)
     big_hw = (rows + 2 * margin, cols + 2 * margin)
-    factor = (big_hw[0] / rows, big_hw[1] / cols)
-    region = (round(region_size_hw[0] * factor[0]), round(region_size_hw[1] * factor[1]))
-    big = search_patch(image, position, region, big_hw)
-    source_centre = ((big_hw[1] - 1) / 2.0, (big_hw[0] - 1) / 2.0)
-    output_centre = ((cols - 1) / 2.0, (rows - 1) / 2.0)
-    return _warp(big, _inverse_map(angle_deg, source_centre, output_centre), (rows, cols))
+    big = None
+    patches = []
+    for angle in angles_deg:
+        if angle == 0.0:
+            patches.append(search_patch(image, position, region_size_hw, output_size_hw))
+            continue
+        if big is None:
+            factor = (big_hw[0] / rows, big_hw[1] / cols)
+            region = (round(region_size_hw[0] * factor[0]), round(region_size_hw[1] * factor[1]))
+            big = search_patch(image, position, region, big_hw)
+        source_centre = ((big_hw[1] - 1) / 2.0, (big_hw[0] - 1) / 2.0)
+        output_centre = ((cols - 1) / 2.0, (rows - 1) / 2.0)
+        matrix = _inverse_map(angle, source_centre, output_centre)
+        patches.append(_warp(big, matrix, (rows, cols)))
+    return patches
 
 
 def upright_view(
@@ -81,7 +89,7 @@ def upright_view(
     is upright, and the position's 1-based (row, col) in it: what the scale filter samples."""
     centre = side // 2  # 0-based index of `position` in the view, as crop_replicate centres
     # Turned about the point half a pixel past the position's pixel: the centre of an even-sized
-    # crop around it (sampling.crop_replicate), about which rotated_search_patch turns too.
+    # crop around it (sampling.crop_replicate), about which rotated_search_patches turns too.
     source_centre = (float(position[1]) - 0.5, float(position[0]) - 0.5)
     matrix = _inverse_map(angle_deg, source_centre, (centre + 0.5, centre + 0.5))
     view = _warp(image, matrix, (side, side))

@@ -329,9 +329,9 @@ class AutoTrack:
         `rotation_step`, at whichever of it and one step either way has the highest peak (the
         angle is then taken: rotation.py)."""
         step = self.params.rotation_step
+        angles = rotation.candidate_angles(self.angle, step) if step else (self.angle,)
         best = None
-        for angle in rotation.candidate_angles(self.angle, step) if step else (self.angle,):
-            zf = self._features_spectrum(image, angle)
+        for angle, zf in zip(angles, self._features_spectra(image, angles), strict=True):
             response = dcf.detection_response(self.filter_f, zf, self.grid_size)
             peak = dcf.newton_peak(response, self.params.newton_iterations)
             if best is None or peak[2] > best[2][2]:
@@ -352,17 +352,22 @@ class AutoTrack:
         side = int(math.ceil(largest * math.sqrt(2.0))) + 2
         return rotation.upright_view(image, self.position, self.angle, side)
 
-    def _features_spectrum(self, image: np.ndarray, angle: float | None = None) -> np.ndarray:
+    def _features_spectra(self, image: np.ndarray, angles: tuple[float, ...]) -> list:
+        """The windowed feature spectra of the search region sampled at each angle."""
         region = dcf.matlab_round(self.window_size * self.scale).astype(int)
-        patch = rotation.rotated_search_patch(
-            image,
-            self.position,
-            (region[0], region[1]),
-            (int(self.window_size[0]), int(self.window_size[1])),
-            self.angle if angle is None else angle,
+        output = (int(self.window_size[0]), int(self.window_size[1]))
+        patches = rotation.rotated_search_patches(
+            image, self.position, (region[0], region[1]), output, angles
         )
-        features = extract_features(patch, self.params, self.colour_table)
-        return self.transform.forward_windowed(features, self.cos_window)
+        return [
+            self.transform.forward_windowed(
+                extract_features(patch, self.params, self.colour_table), self.cos_window
+            )
+            for patch in patches
+        ]
+
+    def _features_spectrum(self, image: np.ndarray) -> np.ndarray:
+        return self._features_spectra(image, (self.angle,))[0]
 
     def _theta_update(
         self, theta_ref: float, filter_prev: np.ndarray
