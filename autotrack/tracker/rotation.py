@@ -96,8 +96,11 @@ def upright_view(
     return view, np.array([centre + 1.0, centre + 1.0])
 
 
-def candidate_angles(angle_deg: float, step_deg: float) -> tuple[float, float, float]:
-    """The current angle first, then one step either way (the pool searched each frame)."""
+def candidate_angles(angle_deg: float, step_deg: float) -> tuple[float, ...]:
+    """The current angle first, then one step either way (the pool searched each frame); the
+    current angle alone when the step is 0."""
+    if not step_deg:
+        return (angle_deg,)
     return (angle_deg, angle_deg + step_deg, angle_deg - step_deg)
 
 

@@ -285,12 +285,17 @@ class AutoTrack:
             prior = self.motion.prior(floor, self.params.cell_size * self.scale)
         return memory.disambiguate(response, memory_response, ratio, separation, prior)
 
+    def _confidence_of(self, peak_score: float, response: np.ndarray) -> float:
+        """The detection's calibrated confidence (robust.ResponseConfidence); 0 without a gate."""
+        if self.confidence is None:
+            return 0.0
+        return self.confidence.confidence(peak_score, robust.apce(response))
+
     def _is_confident(self, peak_score: float, response: np.ndarray) -> bool:
         """Whether this detection clears the confidence gate (always True without a gate)."""
         if self.confidence is None:
             return True
-        confidence = self.confidence.confidence(peak_score, robust.apce(response))
-        return confidence >= self.params.confidence_gate
+        return self._confidence_of(peak_score, response) >= self.params.confidence_gate
 
     def _redetect(self, image: np.ndarray, local_peak: float):
         """Wider search (redetect.py); moves the tracker and returns its detection, or None."""
@@ -326,15 +331,15 @@ class AutoTrack:
 
     def _detect(self, image: np.ndarray):
         """(features spectrum, response, (row, col, peak)) at the current angle or, with
-        `rotation_step`, at whichever of it and one step either way has the highest peak (the
+        `rotation_step`, one step either way if its peak beats it by `rotation_margin` (the
         angle is then taken: rotation.py)."""
-        step = self.params.rotation_step
-        angles = rotation.candidate_angles(self.angle, step) if step else (self.angle,)
+        p = self.params
+        angles = rotation.candidate_angles(self.angle, p.rotation_step)
         best = None
         for angle, zf in zip(angles, self._features_spectra(image, angles), strict=True):
             response = dcf.detection_response(self.filter_f, zf, self.grid_size)
-            peak = dcf.newton_peak(response, self.params.newton_iterations)
-            if best is None or peak[2] > best[2][2]:
+            peak = dcf.newton_peak(response, p.newton_iterations)
+            if best is None or peak[2] > best[2][2] * (1.0 + p.rotation_margin):
                 best, best_angle = (zf, response, peak), angle
         self.angle = rotation.wrapped(best_angle)
         return best
