@@ -20,7 +20,7 @@ from app.owners import BrowserSpace, browser_tag
 from app.recordings import RecordingRegistry
 from app.tab import Tab
 from app.uploads import UploadReceiver
-from autotrack.tracker.tracker import warm_up
+from autotrack.tracker.warmup import warm_up
 
 
 class StudioServer:

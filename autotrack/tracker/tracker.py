@@ -8,7 +8,6 @@ coordinates internally and converted to 0-based (x, y, w, h) boxes at the edge.
 from __future__ import annotations
 
 import math
-import time
 from collections.abc import Sequence
 
 import cv2
@@ -23,7 +22,7 @@ from autotrack.tracker.features import extract_features, feature_dim, is_grey, l
 from autotrack.tracker.inputs import as_image, validate_box
 from autotrack.tracker.scale import ScaleFilter
 
-__all__ = ["AutoTrack", "CvAutoTrack", "validate_box", "warm_up"]
+__all__ = ["AutoTrack", "CvAutoTrack", "validate_box"]
 
 
 class AutoTrack:
@@ -106,6 +105,8 @@ class AutoTrack:
 
         self.frame_number = 1
         self.angle = 0.0  # the target's in-plane angle, degrees (rotation.py)
+        self.last_peak = math.inf  # the last detection's peak at its angle
+        self.turning = False  # whether the last frame took a turned sample
         search_box = self._search_box()
         channels = feature_dim(p, colour=not self.grey)
         self.transform = dcf.SpectrumTransform(channels, self.grid_size)
@@ -330,17 +331,25 @@ class AutoTrack:
         return None
 
     def _detect(self, image: np.ndarray):
-        """(features spectrum, response, (row, col, peak)) at the current angle or, with
-        `rotation_step`, one step either way if its peak beats it by `rotation_margin` (the
-        angle is then taken: rotation.py)."""
+        """(features spectrum, response, (row, col, peak)) at the current angle; with
+        `rotation_step`, when that peak fell below the last frame's (a turn lowers the match) or
+        the target turned on the last frame, one step either way is tried and taken if its peak
+        beats it by `rotation_margin`."""
         p = self.params
-        angles = rotation.candidate_angles(self.angle, p.rotation_step)
-        best = None
+        zf = self._features_spectrum(image)
+        response = dcf.detection_response(self.filter_f, zf, self.grid_size)
+        best = (zf, response, dcf.newton_peak(response, p.newton_iterations))
+        last_peak, self.last_peak = self.last_peak, best[2][2]
+        if not p.rotation_step or (best[2][2] >= last_peak and not self.turning):
+            return best
+        angles = rotation.candidate_angles(self.angle, p.rotation_step)[1:]
+        best_angle = self.angle
         for angle, zf in zip(angles, self._features_spectra(image, angles), strict=True):
             response = dcf.detection_response(self.filter_f, zf, self.grid_size)
             peak = dcf.newton_peak(response, p.newton_iterations)
-            if best is None or peak[2] > best[2][2] * (1.0 + p.rotation_margin):
+            if peak[2] > best[2][2] * (1.0 + p.rotation_margin):
                 best, best_angle = (zf, response, peak), angle
+        self.turning = best_angle != self.angle
         self.angle = rotation.wrapped(best_angle)
         return best
 
@@ -486,21 +495,3 @@ class CvAutoTrack:
         """(ok, box): ok is False on frames judged aberrant (the box is still the estimate)."""
         result = self.tracker.update(self._to_rgb(frame))
         return (not result.aberrant, result.box)
-
-
-def warm_up(params: TrackerParams | None = None) -> float:
-    """Compile (or load from numba's cache) every kernel the tracker runs, by tracking a small
-    synthetic target for four frames in colour and in grey; returns the seconds it took.
-
-    The first box a user draws then answers at once instead of waiting for the compiler.
-    """
-    started = time.perf_counter()
-    rng = np.random.default_rng(0)
-    frame = rng.integers(0, 64, (120, 160, 3), dtype=np.uint8)
-    frame[40:70, 60:90] = (230, 180, 40)
-    for image in (frame, cv2.cvtColor(frame, cv2.COLOR_RGB2GRAY)):
-        tracker = AutoTrack(params or TrackerParams())
-        tracker.init(image, (60.0, 40.0, 30.0, 30.0))
-        for shift in (1, 2, 3):
-            tracker.update(np.roll(image, shift, axis=1))
-    return time.perf_counter() - started
