@@ -150,7 +150,7 @@ class TrackerParams:
     and this many degrees either way, in patches sampled in the target's turned frame, and the
     angle with the highest peak is taken; 0 = the release's axis-aligned patches. 10: half an
     fHOG orientation bin (20 degrees), the smallest turn that moves a gradient's energy into the
-    neighbouring bin."""
+    neighbouring bin. Measured, not in `autotrack+` (docs/tracker.md)."""
     rotation_margin: float = 0.05
     """A turned sample is taken only when its peak exceeds the current angle's by this fraction
     (a prior that the target keeps its angle). 0.05: twice the median frame-to-frame change of

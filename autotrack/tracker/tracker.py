@@ -286,17 +286,12 @@ class AutoTrack:
             prior = self.motion.prior(floor, self.params.cell_size * self.scale)
         return memory.disambiguate(response, memory_response, ratio, separation, prior)
 
-    def _confidence_of(self, peak_score: float, response: np.ndarray) -> float:
-        """The detection's calibrated confidence (robust.ResponseConfidence); 0 without a gate."""
-        if self.confidence is None:
-            return 0.0
-        return self.confidence.confidence(peak_score, robust.apce(response))
-
     def _is_confident(self, peak_score: float, response: np.ndarray) -> bool:
         """Whether this detection clears the confidence gate (always True without a gate)."""
         if self.confidence is None:
             return True
-        return self._confidence_of(peak_score, response) >= self.params.confidence_gate
+        confidence = self.confidence.confidence(peak_score, robust.apce(response))
+        return confidence >= self.params.confidence_gate
 
     def _redetect(self, image: np.ndarray, local_peak: float):
         """Wider search (redetect.py); moves the tracker and returns its detection, or None."""
