@@ -104,9 +104,8 @@ class AutoTrack:
         )
 
         self.frame_number = 1
-        self.angle = 0.0  # the target's in-plane angle, degrees (rotation.py)
-        self.last_peak = math.inf  # the last detection's peak at its angle
-        self.turning = False  # whether the last frame took a turned sample
+        # rotation.py: the in-plane angle (degrees), the last peak, whether the last frame turned
+        self.angle, self.last_peak, self.turning = 0.0, math.inf, False
         search_box = self._search_box()
         channels = feature_dim(p, colour=not self.grey)
         self.transform = dcf.SpectrumTransform(channels, self.grid_size)
