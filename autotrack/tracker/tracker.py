@@ -104,8 +104,7 @@ class AutoTrack:
         )
 
         self.frame_number = 1
-        # rotation.py: the in-plane angle (degrees), the last peak, whether the last frame turned
-        self.angle, self.last_peak, self.turning = 0.0, math.inf, False
+        self.angle, self.last_peak, self.turning = 0.0, math.inf, False  # rotation.py's state
         search_box = self._search_box()
         channels = feature_dim(p, colour=not self.grey)
         self.transform = dcf.SpectrumTransform(channels, self.grid_size)
