@@ -21,7 +21,7 @@ from app.recordings import RecordingRegistry
 from app.tab import Tab
 from app.uploads import UploadReceiver
 from autotrack.tracker.target_process import WorkerPool
-from autotrack.tracker.tracker import warm_up
+from autotrack.tracker.warmup import warm_up
 
 
 class StudioServer:

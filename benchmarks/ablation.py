@@ -72,6 +72,7 @@ CANDIDATES: dict[str, dict] = {
     f"{PLUS} + velocity prediction": ABLATION["+ velocity prediction"],
     f"{PLUS} + motion prior": {"motion_prior": 0.5},
     f"{PLUS} + relative ASR": {"asr_relative": True},
+    f"{PLUS} + rotation": {"rotation_step": 10.0, "rotation_margin": 0.05},
 }
 """Switches measured on top of `autotrack+` but left out of the preset (docs/benchmarks.md);
 their parameters' sensitivity is taken around these variants."""
@@ -272,7 +273,7 @@ def build_tables(sequences, results: dict, table: dict[str, dict]) -> str:
             [
                 *("faithful", "+RV", "+RV+ASR", "+gate", "+gate+redet", "+scale", "+aspect"),
                 *("+velocity", "+memory", PLUS, "+ no ASR", "+ no memory", "+ no RV/ASR"),
-                *("+ + aspect", "+ + velocity", "+ + motion prior", "+ + rel. ASR"),
+                *("+ + aspect", "+ + velocity", "+ + motion prior", "+ + rel. ASR", "+ + rotation"),
             ],
             strict=True,
         )

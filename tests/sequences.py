@@ -14,6 +14,8 @@ class GeneratedSequence:
     """RGB uint8 frames."""
     boxes: np.ndarray
     """(N, 4) ground-truth boxes, 0-based x, y, w, h."""
+    angles: np.ndarray | None = None
+    """(N,) in-plane angle of the target, degrees counter-clockwise, where one is generated."""
 
 
 def _clutter(rng: np.random.Generator, height: int, width: int) -> np.ndarray:
@@ -182,3 +184,39 @@ def appearing_twin_sequence(
         frames.append(np.clip(frame, 0, 255).astype(np.uint8))
         boxes.append((left, top, target_size, target_size))
     return GeneratedSequence(frames=frames, boxes=np.array(boxes, dtype=np.float64))
+
+
+def spinning_target_sequence(
+    num_frames: int = 36,
+    size_hw: tuple[int, int] = (240, 320),
+    target_hw: tuple[int, int] = (36, 60),
+    degrees_per_frame: float = 7.0,
+    seed: int = 5,
+) -> GeneratedSequence:
+    """An elongated textured target drifting right while it turns in the image plane,
+    `degrees_per_frame` counter-clockwise as displayed (a yawing drone's view of a vehicle).
+
+    The boxes are the bound of the ellipse inscribed in the turned target (as the tracker
+    reports, rotation.bounding_size); `angles` holds the true angle of each frame.
+    """
+    rng = np.random.default_rng(seed)
+    height, width = size_hw
+    background = _clutter(rng, height, width)
+    texture = cv2.resize(_target_texture(rng, 64), (target_hw[1], target_hw[0]))
+    frames, boxes, angles = [], [], []
+    for index in range(num_frames):
+        angle = degrees_per_frame * index
+        cx, cy = width * 0.35 + 1.5 * index, height * 0.5
+        turn = cv2.getRotationMatrix2D((target_hw[1] / 2 - 0.5, target_hw[0] / 2 - 0.5), angle, 1)
+        turn[:, 2] += (cx - target_hw[1] / 2, cy - target_hw[0] / 2)
+        layer = cv2.warpAffine(texture, turn, (width, height), flags=cv2.INTER_LINEAR)
+        mask = cv2.warpAffine(np.ones(target_hw, np.float32), turn, (width, height))[:, :, None]
+        frame = background * (1 - mask) + layer * mask
+        frames.append(np.clip(frame, 0, 255).astype(np.uint8))
+        radians = np.radians(angle)
+        cos, sin = abs(np.cos(radians)), abs(np.sin(radians))
+        box_h = np.hypot(target_hw[0] * cos, target_hw[1] * sin)
+        box_w = np.hypot(target_hw[1] * cos, target_hw[0] * sin)
+        boxes.append((cx - box_w / 2, cy - box_h / 2, box_w, box_h))
+        angles.append(angle)
+    return GeneratedSequence(frames=frames, boxes=np.array(boxes), angles=np.array(angles))

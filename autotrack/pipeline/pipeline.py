@@ -43,8 +43,8 @@ from autotrack.result import PoseEstimate, TrackResult
 from autotrack.sessions import Session, SessionRecorder
 from autotrack.sessions.maps import FrameMaps, SessionMaps
 from autotrack.sessions.messages import landmark_positions
+from autotrack.tracker.inputs import validate_box
 from autotrack.tracker.target_process import WorkerPool
-from autotrack.tracker.tracker import validate_box
 
 Box = tuple[float, float, float, float]
 

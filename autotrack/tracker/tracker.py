@@ -8,54 +8,21 @@ coordinates internally and converted to 0-based (x, y, w, h) boxes at the edge.
 from __future__ import annotations
 
 import math
-import time
 from collections.abc import Sequence
 
 import cv2
 import numpy as np
 
-from autotrack.errors import BoxError, InputError
+from autotrack.errors import InputError
 from autotrack.params import TrackerParams
 from autotrack.result import TrackResult
-from autotrack.tracker import dcf, memory, motion, redetect, regularization, robust
+from autotrack.tracker import dcf, memory, motion, redetect, regularization, robust, rotation
 from autotrack.tracker.aspect import AspectFilter
 from autotrack.tracker.features import extract_features, feature_dim, is_grey, load_colour_table
-from autotrack.tracker.sampling import search_patch
+from autotrack.tracker.inputs import as_image, validate_box
 from autotrack.tracker.scale import ScaleFilter
 
-
-def validate_box(box: Sequence[float], image_size_wh: tuple[int, int]) -> tuple[float, ...]:
-    """Check an initial (x, y, w, h) box: finite, positive size, centre inside the image."""
-    try:
-        values = tuple(float(v) for v in box)
-    except (TypeError, ValueError) as error:
-        raise BoxError(f"box must be four numbers x, y, w, h; got {box!r}") from error
-    if len(values) != 4 or not all(math.isfinite(v) for v in values):
-        raise BoxError(f"box must be four finite numbers x, y, w, h; got {box!r}")
-    x, y, w, h = values
-    if w < 1 or h < 1:
-        raise BoxError(f"box {values} has zero size: width and height must be at least 1 pixel")
-    width, height = image_size_wh
-    cx, cy = x + w / 2.0, y + h / 2.0
-    if not (0 <= cx < width and 0 <= cy < height):
-        raise BoxError(
-            f"box {values} lies outside the {width}x{height} image (its centre must be inside)"
-        )
-    return values
-
-
-def _as_image(frame: np.ndarray) -> np.ndarray:
-    if not isinstance(frame, np.ndarray) or frame.ndim not in (2, 3) or frame.size == 0:
-        raise InputError("a frame must be a non-empty HxW or HxWx3 numpy array")
-    if frame.ndim == 3 and frame.shape[2] == 4:
-        frame = frame[:, :, :3]
-    if frame.ndim == 3 and frame.shape[2] not in (1, 3):
-        raise InputError(f"a frame must have 1 or 3 channels, not {frame.shape[2]}")
-    if frame.dtype != np.uint8:
-        frame = np.clip(frame, 0, 255).astype(np.uint8)
-    if frame.ndim == 3 and frame.shape[2] == 1:
-        frame = frame[:, :, 0]
-    return frame
+__all__ = ["AutoTrack", "CvAutoTrack", "validate_box"]
 
 
 class AutoTrack:
@@ -93,7 +60,7 @@ class AutoTrack:
 
     def init(self, frame: np.ndarray, box: Sequence[float]) -> TrackResult:
         """Start tracking the target in `box` (0-based x, y, w, h) of `frame`."""
-        image = _as_image(frame)
+        image = as_image(frame)
         height, width = image.shape[:2]
         x, y, w, h = validate_box(box, (width, height))
         p = self.params
@@ -137,6 +104,7 @@ class AutoTrack:
         )
 
         self.frame_number = 1
+        self.angle, self.last_peak, self.turning = 0.0, math.inf, False  # rotation.py's state
         search_box = self._search_box()
         channels = feature_dim(p, colour=not self.grey)
         self.transform = dcf.SpectrumTransform(channels, self.grid_size)
@@ -183,10 +151,8 @@ class AutoTrack:
             self.position = self._predicted_position()
         search_box = self._search_box()
 
-        # Detection (eq. 16) and the sub-pixel peak.
-        zf = self._features_spectrum(image)
-        response = dcf.detection_response(self.filter_f, zf, self.grid_size)
-        disp_row, disp_col, peak_score = dcf.newton_peak(response, p.newton_iterations)
+        # Detection (eq. 16) and the sub-pixel peak, over the angle pool with `rotation_step`.
+        zf, response, (disp_row, disp_col, peak_score) = self._detect(image)
         chosen, ambiguous = self._disambiguate(response, zf)
         if chosen is not None:
             disp_row, disp_col, peak_score = chosen
@@ -207,7 +173,8 @@ class AutoTrack:
 
         # Translation in pixels and the scale search at the new position.
         best_scale = None
-        translation = dcf.matlab_round(np.array([disp_row, disp_col]) * p.cell_size * self.scale)
+        shift = np.array([disp_row, disp_col]) * p.cell_size * self.scale
+        translation = dcf.matlab_round(rotation.rotate_offset(shift, self.angle))
         self.position = self.position + translation
         moved = self.position - start if confident and start is not None else None
         self.velocity = moved if moved is not None else 0.0 * translation
@@ -215,20 +182,20 @@ class AutoTrack:
             self.motion.observe(moved)
         # A low-confidence frame (occluder, loss) changes neither the filter nor the scale.
         if confident:
-            best_scale, self.scale = self.scale_filter.detect(image, self.position, self.scale)
+            best_scale, self.scale = self.scale_filter.detect(*self._upright(image), self.scale)
             self._detect_aspect(image)
 
         # Train on the detection features moved to the new position (release's reuse).
         theta = float("nan")
         if not aberrant and confident:
-            cells = translation / (p.cell_size * self.scale)
+            cells = rotation.rotate_offset(translation, -self.angle) / (p.cell_size * self.scale)
             xf = dcf.shift_spectrum(zf, cells[0], cells[1], self.grid_size)
             theta_start = p.zeta if p.adaptive_temporal else p.fixed_theta
             self.filter_f, theta = self._train(xf, theta_start, theta_ref)
             if self.memory is not None and not ambiguous:
                 self.memory.learn(self.filter_f)
         if confident:
-            self.scale_filter.update(image, self.position, self.scale, best_scale)
+            self.scale_filter.update(*self._upright(image), self.scale, best_scale)
             if self.aspect_filter is not None:
                 self.aspect_filter.update(image, self.position, self._box_size_hw())
 
@@ -294,7 +261,7 @@ class AutoTrack:
         """A frame of the first frame's size, prepared like it; InputError otherwise."""
         if self.frame_number == 0:
             raise InputError("call init(frame, box) before update(frame)")
-        image = _as_image(frame)
+        image = as_image(frame)
         if image.shape[:2] != self.image_size_hw:
             raise InputError(
                 f"frame size {image.shape[1]}x{image.shape[0]} differs from the first frame's "
@@ -356,16 +323,58 @@ class AutoTrack:
         self.position = saved
         return None
 
-    def _features_spectrum(self, image: np.ndarray) -> np.ndarray:
-        region = dcf.matlab_round(self.window_size * self.scale).astype(int)
-        patch = search_patch(
-            image,
-            self.position,
-            (region[0], region[1]),
-            (int(self.window_size[0]), int(self.window_size[1])),
+    def _detect(self, image: np.ndarray):
+        """(features spectrum, response, (row, col, peak)) at the current angle; with
+        `rotation_step`, when that peak fell below the last frame's (a turn lowers the match) or
+        the target turned on the last frame, one step either way is tried and taken if its peak
+        beats it by `rotation_margin`."""
+        p = self.params
+        zf = self._features_spectrum(image)
+        response = dcf.detection_response(self.filter_f, zf, self.grid_size)
+        best = (zf, response, dcf.newton_peak(response, p.newton_iterations))
+        last_peak, self.last_peak = self.last_peak, best[2][2]
+        if not p.rotation_step or (best[2][2] >= last_peak and not self.turning):
+            return best
+        angles = rotation.candidate_angles(self.angle, p.rotation_step)[1:]
+        best_angle = self.angle
+        for angle, zf in zip(angles, self._features_spectra(image, angles), strict=True):
+            response = dcf.detection_response(self.filter_f, zf, self.grid_size)
+            peak = dcf.newton_peak(response, p.newton_iterations)
+            if peak[2] > best[2][2] * (1.0 + p.rotation_margin):
+                best, best_angle = (zf, response, peak), angle
+        self.turning = best_angle != self.angle
+        self.angle = rotation.wrapped(best_angle)
+        return best
+
+    def _upright(self, image: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(image, position) for the scale filter: the frame itself, or with the target turned,
+        a view around it turned upright that holds the largest scale sample."""
+        if self.angle == 0.0:
+            return image, self.position
+        largest = (
+            np.max(self.scale_filter.base_target_size_hw)
+            * self.scale
+            * self.scale_filter.scale_steps[0]
         )
-        features = extract_features(patch, self.params, self.colour_table)
-        return self.transform.forward_windowed(features, self.cos_window)
+        side = int(math.ceil(largest * math.sqrt(2.0))) + 2
+        return rotation.upright_view(image, self.position, self.angle, side)
+
+    def _features_spectra(self, image: np.ndarray, angles: tuple[float, ...]) -> list:
+        """The windowed feature spectra of the search region sampled at each angle."""
+        region = dcf.matlab_round(self.window_size * self.scale).astype(int)
+        output = (int(self.window_size[0]), int(self.window_size[1]))
+        patches = rotation.rotated_search_patches(
+            image, self.position, (region[0], region[1]), output, angles
+        )
+        return [
+            self.transform.forward_windowed(
+                extract_features(patch, self.params, self.colour_table), self.cos_window
+            )
+            for patch in patches
+        ]
+
+    def _features_spectrum(self, image: np.ndarray) -> np.ndarray:
+        return self._features_spectra(image, (self.angle,))[0]
 
     def _theta_update(
         self, theta_ref: float, filter_prev: np.ndarray
@@ -434,6 +443,8 @@ class AutoTrack:
         return size
 
     def _target_size(self) -> np.ndarray:
+        if self.angle:
+            return dcf.matlab_round(rotation.bounding_size(self._box_size_hw(), self.angle))
         return dcf.matlab_round(self._box_size_hw())
 
     def _box(self) -> tuple[float, float, float, float]:
@@ -477,21 +488,3 @@ class CvAutoTrack:
         """(ok, box): ok is False on frames judged aberrant (the box is still the estimate)."""
         result = self.tracker.update(self._to_rgb(frame))
         return (not result.aberrant, result.box)
-
-
-def warm_up(params: TrackerParams | None = None) -> float:
-    """Compile (or load from numba's cache) every kernel the tracker runs, by tracking a small
-    synthetic target for four frames in colour and in grey; returns the seconds it took.
-
-    The first box a user draws then answers at once instead of waiting for the compiler.
-    """
-    started = time.perf_counter()
-    rng = np.random.default_rng(0)
-    frame = rng.integers(0, 64, (120, 160, 3), dtype=np.uint8)
-    frame[40:70, 60:90] = (230, 180, 40)
-    for image in (frame, cv2.cvtColor(frame, cv2.COLOR_RGB2GRAY)):
-        tracker = AutoTrack(params or TrackerParams())
-        tracker.init(image, (60.0, 40.0, 30.0, 30.0))
-        for shift in (1, 2, 3):
-            tracker.update(np.roll(image, shift, axis=1))
-    return time.perf_counter() - started

@@ -1,0 +1,125 @@
+"""In-plane rotation (autotrack+ switch `rotation_step`): patches sampled in the target's frame.
+
+The target's in-plane angle is searched as SAMF searches scales (Li, Zhu: *A Scale Adaptive
+Kernel Correlation Filter Tracker with Feature Integration*, ECCV 2014 workshops), over a pool
+of angles around the current one, as the rotation pools of RAJSSC (Zhang et al., *Robust
+Tracking via Joint Scale-Rotation Correlation Filter*, ICCV 2015 workshops) and LDES (Li et al.,
+*Robust Estimation of Similarity Transformation for Visual Object Tracking*, AAAI 2019) do for
+rotation: the patch is sampled in the rotated frame, so the filter stays aligned with the
+target. Angles are in degrees, counter-clockwise as the image is displayed; an offset (row, col)
+in the target's frame is `rotate_offset(offset, angle)` in the image.
+"""
+
+from __future__ import annotations
+
+import math
+
+import cv2
+import numpy as np
+
+from autotrack.tracker.sampling import search_patch
+
+
+def rotate_offset(offset_rowcol: np.ndarray, angle_deg: float) -> np.ndarray:
+    """An offset (row, col) in the frame rotated by `angle_deg`, expressed in the image's."""
+    radians = math.radians(angle_deg)
+    cos, sin = math.cos(radians), math.sin(radians)
+    row, col = float(offset_rowcol[0]), float(offset_rowcol[1])
+    # x = col, y = row (down); a counter-clockwise turn on screen is clockwise in (x, y).
+    return np.array([cos * row - sin * col, sin * row + cos * col])
+
+
+def _inverse_map(angle_deg: float, source_centre_xy, output_centre_xy) -> np.ndarray:
+    """2 x 3 map from an output pixel (x, y) to its source point (cv2.WARP_INVERSE_MAP)."""
+    radians = math.radians(angle_deg)
+    cos, sin = math.cos(radians), math.sin(radians)
+    linear = np.array([[cos, sin], [-sin, cos]])  # (x, y) form of rotate_offset
+    shift = np.asarray(source_centre_xy) - linear @ np.asarray(output_centre_xy)
+    return np.hstack([linear, shift[:, None]])
+
+
+def _warp(source: np.ndarray, matrix: np.ndarray, size_hw: tuple[int, int]) -> np.ndarray:
+    return cv2.warpAffine(
+        source,
+        matrix,
+        (int(size_hw[1]), int(size_hw[0])),
+        flags=cv2.INTER_LINEAR | cv2.WARP_INVERSE_MAP,
+        borderMode=cv2.BORDER_REPLICATE,
+    )
+
+
+def rotated_search_patches(
+    image: np.ndarray,
+    position: tuple[float, float],
+    region_size_hw: tuple[int, int],
+    output_size_hw: tuple[int, int],
+    angles_deg: tuple[float, ...],
+) -> list[np.ndarray]:
+    """`sampling.search_patch` in the frame rotated by each angle (the same patch at 0).
+
+    The search region is resampled once (area averaging, as the release) with a margin that
+    covers its rotated corners, then rotated at the patch's resolution for each angle: one
+    area resampling of ~2x the output's area and one small warp per angle, instead of a warp
+    at the image's resolution.
+    """
+    rows, cols = int(output_size_hw[0]), int(output_size_hw[1])
+    margin = math.ceil(max(rows, cols) * (math.sqrt(2.0) - 1.0) / 2.0)
+    big_hw = (rows + 2 * margin, cols + 2 * margin)
+    big = None
+    patches = []
+    for angle in angles_deg:
+        if angle == 0.0:
+            patches.append(search_patch(image, position, region_size_hw, output_size_hw))
+            continue
+        if big is None:
+            factor = (big_hw[0] / rows, big_hw[1] / cols)
+            region = (round(region_size_hw[0] * factor[0]), round(region_size_hw[1] * factor[1]))
+            big = search_patch(image, position, region, big_hw)
+        source_centre = ((big_hw[1] - 1) / 2.0, (big_hw[0] - 1) / 2.0)
+        output_centre = ((cols - 1) / 2.0, (rows - 1) / 2.0)
+        matrix = _inverse_map(angle, source_centre, output_centre)
+        patches.append(_warp(big, matrix, (rows, cols)))
+    return patches
+
+
+def upright_view(
+    image: np.ndarray, position: tuple[float, float], angle_deg: float, side: int
+) -> tuple[np.ndarray, np.ndarray]:
+    """A `side` x `side` view of the image around the 1-based `position`, rotated so the target
+    is upright, and the position's 1-based (row, col) in it: what the scale filter samples."""
+    centre = side // 2  # 0-based index of `position` in the view, as crop_replicate centres
+    # Turned about the point half a pixel past the position's pixel: the centre of an even-sized
+    # crop around it (sampling.crop_replicate), about which rotated_search_patches turns too.
+    source_centre = (float(position[1]) - 0.5, float(position[0]) - 0.5)
+    matrix = _inverse_map(angle_deg, source_centre, (centre + 0.5, centre + 0.5))
+    view = _warp(image, matrix, (side, side))
+    return view, np.array([centre + 1.0, centre + 1.0])
+
+
+def candidate_angles(angle_deg: float, step_deg: float) -> tuple[float, ...]:
+    """The current angle first, then one step either way (the pool searched each frame); the
+    current angle alone when the step is 0."""
+    if not step_deg:
+        return (angle_deg,)
+    return (angle_deg, angle_deg + step_deg, angle_deg - step_deg)
+
+
+def wrapped(angle_deg: float) -> float:
+    """The same angle in (-180, 180]."""
+    turned = math.fmod(angle_deg + 180.0, 360.0)
+    return turned - 180.0 if turned > 0 else turned + 180.0
+
+
+def bounding_size(size_hw: np.ndarray, angle_deg: float) -> np.ndarray:
+    """(height, width) of the axis-aligned box reported for a target of `size_hw` turned by
+    `angle_deg`: the bound of the ellipse inscribed in the turned box.
+
+    A target fills about the ellipse of its box (a body, a vehicle), not its corners; the bound
+    of the turned rectangle over-states a target turned by 45 degrees by up to 41 % a side,
+    the ellipse's bound is exact for an elliptical target, equal to `size_hw` at 0 and swaps
+    height and width at 90 degrees.
+    """
+    radians = math.radians(angle_deg)
+    cos, sin = abs(math.cos(radians)), abs(math.sin(radians))
+    height, width = float(size_hw[0]), float(size_hw[1])
+    return np.array([math.hypot(height * cos, width * sin), math.hypot(width * cos, height * sin)])
