@@ -952,6 +952,21 @@ def test_drawing_needs_the_frame_canvas(studio) -> None:
     assert moves >= 2  # switching to the 3-D view aimed the camera
 
 
+def _click_canvas(tab, modifier: str | None) -> None:
+    """A click at the canvas centre, as viser reports it, and the tab done with it."""
+    tab.clicked(
+        viser.SceneClickEvent(
+            client=None,
+            client_id=0,
+            ray_origin=(0.0, 0.0, 0.0),
+            ray_direction=(0.0, 0.0, 1.0),
+            screen_pos=(0.5, 0.5),
+            modifier=modifier,
+        )
+    )
+    assert tab.wait_idle()
+
+
 def test_a_click_on_the_frame_says_how_to_draw_a_box(studio) -> None:
     """viser sends no rect-select for a shift-click (a drag of no size), only a click: the
     user is told to drag, at once and in the status line; on the 3-D view, to switch."""
@@ -961,33 +976,13 @@ def test_a_click_on_the_frame_says_how_to_draw_a_box(studio) -> None:
     assert "none yet" in tab.panels.targets.delete.label
     for modifier in ("shift", None):
         channel.notes.clear()
-        tab.clicked(
-            viser.SceneClickEvent(
-                client=None,
-                client_id=0,
-                ray_origin=(0.0, 0.0, 0.0),
-                ray_direction=(0.0, 0.0, 1.0),
-                screen_pos=(0.5, 0.5),
-                modifier=modifier,
-            )
-        )
-        assert tab.wait_idle()
+        _click_canvas(tab, modifier)
         assert channel.notes == [(DRAW_HINT, False)] and tab.controller.message == DRAW_HINT
         assert "hold Shift and drag" in DRAW_HINT and not tab.controller.run.targets
     _set(tab.panels.display.canvas, "3-D view")
     assert tab.wait_idle()
     channel.notes.clear()
-    tab.clicked(
-        viser.SceneClickEvent(
-            client=None,
-            client_id=0,
-            ray_origin=(0.0, 0.0, 0.0),
-            ray_direction=(0.0, 0.0, 1.0),
-            screen_pos=(0.5, 0.5),
-            modifier="shift",
-        )
-    )
-    assert tab.wait_idle()
+    _click_canvas(tab, "shift")
     assert channel.notes == [(SWITCH_HINT, False)] and tab.controller.message == SWITCH_HINT
 
 
