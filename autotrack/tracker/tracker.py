@@ -20,7 +20,10 @@ from autotrack.tracker import dcf, memory, motion, redetect, regularization, rob
 from autotrack.tracker.aspect import AspectFilter
 from autotrack.tracker.features import extract_features, feature_dim, is_grey, load_colour_table
 from autotrack.tracker.inputs import as_image, validate_box
+from autotrack.tracker.kernel_loading import load_package_without_refresh
 from autotrack.tracker.scale import ScaleFilter
+
+load_package_without_refresh()  # every kernel module is imported by now
 
 __all__ = ["AutoTrack", "CvAutoTrack", "validate_box"]
 
