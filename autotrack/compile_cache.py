@@ -6,15 +6,25 @@
   folder instead (`$NUMBA_CACHE_DIR` when it is set and writable, otherwise
   `cache_root() / "numba"`), so the second process loads instead of recompiling (~2 s).
 
+- arrays that take tens of milliseconds to compute and never change for a given source and
+  numpy (the 'lab11' colour table) are kept as `.npy` files by `cached_array`.
+
 This module must stay importable without numba (it runs before numba is imported).
 """
 
 from __future__ import annotations
 
+import hashlib
+import io
 import os
 import sys
 import tempfile
+from collections.abc import Callable
 from pathlib import Path
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:
+    import numpy as np
 
 CACHE_ENV = "AUTOTRACK_CACHE_DIR"
 """Environment variable overriding the cache folder."""
@@ -67,3 +77,31 @@ def configure_numba_cache(package_dir: Path = PACKAGE_DIR) -> Path:
     if numba_config is not None:
         numba_config.CACHE_DIR = str(folder)
     return folder
+
+
+def cached_array(name: str, key: str, build: Callable[[], np.ndarray]) -> np.ndarray:
+    """`build()`'s array, kept between processes in `cache_root() / "arrays"`.
+
+    `key` names everything the array depends on (e.g. a digest of the source that builds it
+    and numpy's version); the file is `{name}-{sha256(key)[:16]}.npy`. A missing, unreadable
+    or corrupt file is rebuilt; an unwritable cache only costs the rebuild next time.
+    """
+    import numpy as np
+
+    from autotrack.io.atomic import write_bytes
+
+    digest = hashlib.sha256(key.encode()).hexdigest()[:16]
+    path = cache_root() / "arrays" / f"{name}-{digest}.npy"
+    try:
+        return np.load(path, allow_pickle=False)
+    except (OSError, ValueError, EOFError):
+        pass
+    array = build()
+    buffer = io.BytesIO()
+    np.save(buffer, array, allow_pickle=False)
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        write_bytes(path, buffer.getvalue())
+    except OSError:
+        pass
+    return array

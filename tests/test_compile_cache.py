@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 import os
 import subprocess
 import sys
@@ -10,6 +11,7 @@ import numpy as np
 import pytest
 
 from autotrack import compile_cache
+from tests.conftest import shared_sequence_dir
 
 
 @pytest.fixture
@@ -89,3 +91,78 @@ def test_tracker_import_leaves_out_modules_tracking_does_not_need():
         [sys.executable, "-c", script], capture_output=True, text=True, check=True
     )
     assert done.stdout.split("\n")[:2] == ["", "True"]
+
+
+_NUMBA_TARGET_MODULES = (  # imported only by numba's CPU-target refresh
+    "numba.np.polynomial.polynomial_core",
+    "numba.typed.typeddict",
+    "numba.np.random.generator_core",
+)
+
+_TRACK_AND_REPORT = (
+    "import sys, json\n"
+    "import numpy as np\n"
+    "from autotrack import AutoTrack, preset\n"
+    "from autotrack.evaluation.datasets import load_otb_sequence\n"
+    "from autotrack.io.frames import read_image\n"
+    "sequence = load_otb_sequence(sys.argv[1])[0]\n"
+    "tracker = AutoTrack(preset('autotrack'))\n"
+    "boxes = [tracker.init(read_image(sequence.frame_paths[0]), sequence.init_box).box]\n"
+    "boxes += [tracker.update(read_image(p)).box for p in sequence.frame_paths[1:4]]\n"
+    "refreshed = [m for m in sys.argv[2:] if m in sys.modules]\n"
+    "from numba import njit\n"
+    "doubled = njit(lambda n: np.arange(n) * 2)(4).tolist()  # compiles: needs the refresh\n"
+    "print(json.dumps([boxes, refreshed, doubled]))\n"
+)
+
+
+def test_second_process_loads_kernels_without_numba_target_refresh():
+    """With the kernels cached, a fresh process tracks without numba's target refresh (the
+    implementation modules it imports stay unloaded), gets the boxes of this process bit for
+    bit, and numba still compiles a new function (which refreshes the target itself)."""
+    from autotrack import AutoTrack, preset
+    from autotrack.evaluation.datasets import load_otb_sequence
+    from autotrack.io.frames import read_image
+
+    folder = shared_sequence_dir("DTB70", "Surfing06")
+    sequence = load_otb_sequence(folder)[0]
+    tracker = AutoTrack(preset("autotrack"))  # also writes the kernel cache when it is cold
+    paths = sequence.frame_paths
+    expected = [list(tracker.init(read_image(paths[0]), sequence.init_box).box)]
+    expected += [list(tracker.update(read_image(p)).box) for p in paths[1:4]]
+    done = subprocess.run(
+        [sys.executable, "-c", _TRACK_AND_REPORT, str(folder)] + list(_NUMBA_TARGET_MODULES),
+        capture_output=True,
+        text=True,
+    )
+    assert done.returncode == 0, done.stderr
+    boxes, refreshed, doubled = json.loads(done.stdout.splitlines()[-1])
+    assert boxes == expected
+    assert refreshed == []
+    assert doubled == [0, 2, 4, 6]
+
+
+def test_cached_array_is_built_once_and_rebuilt_when_corrupt(clean_env):
+    calls = []
+
+    def build():
+        calls.append(1)
+        return np.arange(12, dtype=np.float32).reshape(3, 4) / 7
+
+    first = compile_cache.cached_array("demo", "key 1", build)
+    second = compile_cache.cached_array("demo", "key 1", build)
+    assert len(calls) == 1 and second.tobytes() == first.tobytes() and second.dtype == np.float32
+    compile_cache.cached_array("demo", "key 2", build)  # another key: another file
+    assert len(calls) == 2
+    for path in (clean_env / "user-cache" / "arrays").glob("demo-*.npy"):
+        path.write_bytes(b"\x93NUMPY truncated")
+    assert compile_cache.cached_array("demo", "key 1", build).tobytes() == first.tobytes()
+    assert len(calls) == 3
+
+
+def test_lab11_table_from_the_cache_is_the_built_table():
+    from autotrack.tracker import features
+
+    table = features.lab11_table()
+    assert not table.flags.writeable
+    assert table.tobytes() == features.build_lab11_table().tobytes()

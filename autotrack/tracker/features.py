@@ -23,6 +23,7 @@ import numpy as np
 import scipy.linalg
 from numba import njit
 
+from autotrack.compile_cache import cached_array
 from autotrack.errors import InputError
 from autotrack.params import TrackerParams
 from autotrack.tracker.fhog import fhog, fhog_batch, fhog_channels
@@ -362,16 +363,26 @@ def lab11_projection() -> np.ndarray:
     return basis
 
 
-@lru_cache(maxsize=1)
-def lab11_table() -> np.ndarray:
+def build_lab11_table() -> np.ndarray:
     """The 'lab11' feature of every 8 x 8 x 8 RGB bin, rows indexed like the Color Names table.
 
-    Evaluated at the bin centres (8 i + 3.5); read-only float32 (32768, 10).
+    Evaluated at the bin centres (8 i + 3.5); float32 (32768, 10).
     """
     index = np.arange(COLOUR_TABLE_ROWS)
     centres = np.stack([index % 32, (index // 32) % 32, index // 1024], axis=-1) * 8.0 + 3.5
     features = colour_term_probabilities(centres) @ lab11_projection().T
-    table = np.ascontiguousarray(features, dtype=np.float32)
+    return np.ascontiguousarray(features, dtype=np.float32)
+
+
+@lru_cache(maxsize=1)
+def lab11_table() -> np.ndarray:
+    """`build_lab11_table()`, read-only; kept in the user cache between processes (building it
+    takes ~50 ms of a process's start-up, loading it ~1 ms), keyed by this module's source and
+    numpy's version."""
+    key = f"{Path(__file__).read_bytes().hex()} numpy {np.__version__}"
+    table = cached_array("lab11", key, build_lab11_table)
+    if table.shape != (COLOUR_TABLE_ROWS, COLOUR_CHANNELS) or table.dtype != np.float32:
+        table = build_lab11_table()  # a foreign file under our name
     table.flags.writeable = False
     return table
 
@@ -381,7 +392,7 @@ def lab11_colour_feature(patch_rgb_uint8: np.ndarray, cell: int) -> np.ndarray:
     return colour_table_feature(patch_rgb_uint8, lab11_table(), cell)
 
 
-lab11_table()  # built once here, at import (tens of ms), so no tracked frame pays for it
+lab11_table()  # loaded (or built) once here, at import, so no tracked frame pays for it
 
 
 # -- the stack ----------------------------------------------------------------------------------
