@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import threading
 from pathlib import Path
 
 import cv2
@@ -9,7 +10,7 @@ import numpy as np
 import pytest
 
 from autotrack.errors import InputError
-from autotrack.io.frames import ImageSequence, VideoFrames, open_frames
+from autotrack.io.frames import FrameCache, ImageSequence, VideoFrames, open_frames
 from tests.conftest import shared_sequence_dir
 
 
@@ -190,3 +191,58 @@ def test_a_cut_video_counts_the_frames_it_holds_not_its_header(tmp_path):
     last = source.read(len(source) - 1)  # the last frame counted decodes: playing ends there
     assert float(last.mean()) == pytest.approx(6 * (len(source) - 1), abs=3)
     source.close()
+
+
+class _ThreadRecordingSequence(ImageSequence):
+    """An image sequence that notes which thread read each frame."""
+
+    def __init__(self, paths, name):
+        super().__init__(paths, name)
+        self.readers: dict[int, str] = {}
+
+    def read(self, index):
+        self.readers[index] = threading.current_thread().name
+        return super().read(index)
+
+
+def test_frame_cache_reads_the_next_image_ahead_in_order(tmp_path):
+    """Reading image files in order, each next frame is read on a background thread; the
+    frames come back the same and in order; a jump reads on the caller's thread again."""
+    written = _write_frames(tmp_path / "seq", 8)
+    source = _ThreadRecordingSequence(sorted((tmp_path / "seq").glob("*.png")), "seq")
+    cache = FrameCache(source, size=3)
+    for index in range(6):
+        expected = cv2.cvtColor(written[index], cv2.COLOR_BGR2RGB)
+        np.testing.assert_array_equal(cache.read(index), expected)
+    main = threading.current_thread().name
+    assert source.readers[0] == source.readers[1] == main
+    assert all(source.readers[k].startswith("prefetch-") for k in range(2, 7))
+    np.testing.assert_array_equal(cache.read(0), cv2.cvtColor(written[0], cv2.COLOR_BGR2RGB))
+    assert source.readers[0] == main  # the jump back: no longer cached, read here
+
+
+def test_frame_cache_reports_a_corrupt_frame_read_ahead_as_the_source_does(tmp_path):
+    written = _write_frames(tmp_path / "seq", 6)
+    corrupt = tmp_path / "seq" / "0004.png"
+    corrupt.write_bytes(b"\x89PNG this is not an image")
+    source = _ThreadRecordingSequence(sorted((tmp_path / "seq").glob("*.png")), "seq")
+    cache = FrameCache(source, size=3)
+    for index in range(3):
+        cache.read(index)
+    with pytest.raises(InputError) as error:
+        cache.read(3)
+    assert "frame 3 (0-based; frame 4 counting from 1)" in str(error.value)
+    assert str(corrupt) in str(error.value)
+    np.testing.assert_array_equal(cache.read(4), cv2.cvtColor(written[4], cv2.COLOR_BGR2RGB))
+
+
+def test_frame_cache_never_reads_a_video_ahead(tmp_path):
+    path = tmp_path / "clip.avi"
+    writer = cv2.VideoWriter(str(path), cv2.VideoWriter_fourcc(*"MJPG"), 10, (32, 24))
+    for frame in _write_frames(tmp_path / "frames", 4):
+        writer.write(frame)
+    writer.release()
+    with VideoFrames(path) as video:
+        cache = FrameCache(video, size=3)
+        assert not cache.prefetch
+        assert [cache.read(k).shape for k in range(4)] == [(24, 32, 3)] * 4

@@ -110,6 +110,9 @@ class FrameSource(ABC):
     """Short name of the source (folder or file stem)."""
     fps: float | None
     """Frame rate from the video header; None for image folders."""
+    independent_reads: bool = False
+    """Reading a frame touches no state another read uses, so `FrameCache` may decode the next
+    frame on a background thread (not a video: its decoder reads in order)."""
 
     @abstractmethod
     def __len__(self) -> int:
@@ -162,6 +165,8 @@ class FrameSource(ABC):
 
 class ImageSequence(FrameSource):
     """Frames stored as one image file each."""
+
+    independent_reads = True
 
     def __init__(self, paths: Sequence[Path], name: str) -> None:
         if not paths:
@@ -299,14 +304,47 @@ def open_frames(path: str | Path) -> FrameSource:
     return VideoFrames(path)
 
 
+class _Prefetch:
+    """One frame read on a background thread: OpenCV releases the GIL while it decodes and
+    converts, so the frame is ready when the trackers of the frame before are done."""
+
+    def __init__(self, frames: FrameSource, index: int) -> None:
+        self.index = index
+        self._image: np.ndarray | None = None
+        self._thread = threading.Thread(
+            target=self._read, args=(frames,), name=f"prefetch-{index}", daemon=True
+        )
+        self._thread.start()
+
+    def _read(self, frames: FrameSource) -> None:
+        try:
+            self._image = frames.read(self.index)
+        except Exception:  # noqa: BLE001 - the caller reads it again and reports the error then
+            self._image = None
+
+    def result(self) -> np.ndarray | None:
+        """The frame, or None when the read failed (read it again to get the error)."""
+        self._thread.join()
+        return self._image
+
+
 class FrameCache:
     """The last few frames read from a FrameSource, for stepping back and forth without
-    decoding again."""
+    decoding again.
 
-    def __init__(self, frames: FrameSource, size: int) -> None:
+    Reading frames in order from a source whose reads are independent (image files) reads the
+    next frame on a background thread meanwhile (`prefetch`): the caller gets the same frames
+    in the same order, and a frame that cannot be read raises the source's own error when the
+    caller asks for it, as without prefetching.
+    """
+
+    def __init__(self, frames: FrameSource, size: int, *, prefetch: bool = True) -> None:
         self.frames = frames
         self.size = size
+        self.prefetch = prefetch and frames.independent_reads
         self._cached: OrderedDict[int, np.ndarray] = OrderedDict()
+        self._pending: _Prefetch | None = None
+        self._last_read = -2
 
     def read(self, index: int) -> np.ndarray:
         """Frame `index` (RGB uint8); InputError outside the sequence."""
@@ -316,8 +354,20 @@ class FrameCache:
         if cached is not None:
             self._cached.move_to_end(index)
             return cached
-        image = self.frames.read(index)
+        image = self._prefetched(index)
+        if image is None:
+            image = self.frames.read(index)
         self._cached[index] = image
         if len(self._cached) > self.size:
             self._cached.popitem(last=False)
+        following = index + 1
+        if self.prefetch and index == self._last_read + 1 and following < len(self.frames):
+            self._pending = _Prefetch(self.frames, following)
+        self._last_read = index
         return image
+
+    def _prefetched(self, index: int) -> np.ndarray | None:
+        pending, self._pending = self._pending, None
+        if pending is None or pending.index != index:
+            return None  # a jump: that frame is not needed next after all
+        return pending.result()

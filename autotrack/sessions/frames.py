@@ -48,6 +48,8 @@ def _embedded_jpegs(path: Path) -> dict[int, bytes]:
 class EmbeddedFrames(FrameSource):
     """The frames embedded in a session, indexed as the session indexes them."""
 
+    independent_reads = True  # each read decodes its own JPEG bytes
+
     def __init__(self, session: Session) -> None:
         self.name = Path(session.source).name or str(session.source)
         self.fps = session.fps
