@@ -13,7 +13,6 @@ from dataclasses import dataclass
 
 import cv2
 import numpy as np
-from scipy.optimize import least_squares
 
 from autotrack.errors import InputError
 from autotrack.localization.camera import CameraIntrinsics, camera_pose_from_pnp
@@ -55,11 +54,12 @@ def refine_pose(
 ) -> tuple[np.ndarray, np.ndarray]:
     """Levenberg-Marquardt on the reprojection error, each point's residual scaled by sqrt(weight).
 
-    Equal weights use OpenCV's solvePnPRefineLM; unequal ones the same cost with per-point weights.
+    Equal weights use OpenCV's solvePnPRefineLM; unequal ones the same cost with per-point
+    weights (`weighted_refinement`).
     """
     rvec = np.asarray(rvec, dtype=np.float64).reshape(3, 1).copy()
     tvec = np.asarray(tvec, dtype=np.float64).reshape(3, 1).copy()
-    if weights is None or np.allclose(weights, weights[0]):
+    if weights is None or _all_close(np.asarray(weights, dtype=np.float64)):
         rvec, tvec = cv2.solvePnPRefineLM(
             object_points.reshape(-1, 1, 3),
             image_points.reshape(-1, 1, 2),
@@ -70,19 +70,64 @@ def refine_pose(
             criteria=_LM_CRITERIA,
         )
         return rvec.reshape(3), tvec.reshape(3)
-    scale = np.repeat(np.sqrt(np.asarray(weights, dtype=np.float64)), 2)
-
-    def residuals(params: np.ndarray) -> np.ndarray:
-        projected, _ = reprojection(camera, object_points, params[:3], params[3:])
-        return scale * (projected - image_points).reshape(-1)
-
-    def jacobian(params: np.ndarray) -> np.ndarray:
-        _, jac = reprojection(camera, object_points, params[:3], params[3:])
-        return scale[:, None] * jac
-
     start = np.concatenate([rvec.reshape(3), tvec.reshape(3)])
-    solution = least_squares(residuals, start, jac=jacobian, method="lm", xtol=1e-12, ftol=1e-12)
-    return solution.x[:3], solution.x[3:]
+    solution = weighted_refinement(camera, object_points, image_points, start, weights)
+    return solution[:3], solution[3:]
+
+
+def _all_close(weights: np.ndarray) -> bool:
+    """np.allclose(weights, weights[0]) (its default tolerances) without its overhead."""
+    return bool(np.all(np.abs(weights - weights[0]) <= 1e-8 + 1e-5 * abs(weights[0])))
+
+
+def weighted_refinement(
+    camera: CameraIntrinsics,
+    object_points: np.ndarray,
+    image_points: np.ndarray,
+    start: np.ndarray,
+    weights: np.ndarray,
+    max_iterations: int = 100,
+) -> np.ndarray:
+    """(rvec | tvec) minimising sum_i w_i |project(X_i) - x_i|^2 from `start`: Levenberg-Marquardt
+    with Marquardt's diagonal damping on OpenCV's analytic Jacobian (what solvePnPRefineLM does
+    for equal weights). Stops when a step lowers the cost or moves the parameters by less than
+    1e-12 relative (MINPACK's xtol / ftol as the scipy solver used before had them), or after
+    `max_iterations` steps; every accepted step lowers the cost.
+    """
+    scale = np.repeat(np.sqrt(np.asarray(weights, dtype=np.float64)), 2)
+    targets = np.asarray(image_points, dtype=np.float64).reshape(-1)
+    params = np.asarray(start, dtype=np.float64).copy()
+
+    def evaluate(candidate: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        projected, jac = reprojection(camera, object_points, candidate[:3], candidate[3:])
+        return scale * (projected.reshape(-1) - targets), scale[:, None] * jac
+
+    residual, jac = evaluate(params)
+    cost = float(residual @ residual)
+    damping = 1e-3
+    for _ in range(max_iterations):
+        normal = jac.T @ jac
+        gradient = jac.T @ residual
+        damped = normal + damping * np.diag(np.maximum(np.diag(normal), 1e-12))
+        try:
+            step = -np.linalg.solve(damped, gradient)
+        except np.linalg.LinAlgError:
+            break
+        trial = params + step
+        trial_residual, trial_jac = evaluate(trial)
+        trial_cost = float(trial_residual @ trial_residual)
+        if trial_cost < cost:
+            small_step = np.linalg.norm(step) <= 1e-12 * (np.linalg.norm(params) + 1e-12)
+            small_gain = cost - trial_cost <= 1e-12 * cost
+            params, residual, jac, cost = trial, trial_residual, trial_jac, trial_cost
+            damping = max(damping / 10.0, 1e-12)
+            if small_step or small_gain:
+                break
+        else:
+            damping *= 10.0
+            if damping > 1e12:
+                break
+    return params
 
 
 def solve_pose(

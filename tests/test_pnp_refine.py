@@ -1,0 +1,108 @@
+"""The weighted pose refinement: the same minimum as the general least-squares solver it
+replaced, never worse than where it starts, and the outlier checks built on it unchanged."""
+
+from __future__ import annotations
+
+import math
+
+import cv2
+import numpy as np
+from scipy.optimize import least_squares
+
+from autotrack.localization.camera import project_points
+from autotrack.localization.localizer import Localizer
+from autotrack.localization.pnp import reprojection, weighted_refinement
+from autotrack.synthetic.trajectories import RenderSettings, SequenceSpec, ground_truth_poses
+from autotrack.synthetic.world import default_camera, default_scene
+
+CAMERA = default_camera(1280, 720, RenderSettings().distortion)
+SCENE = default_scene(CAMERA)
+WEIGHTS = np.array([1.0, 0.25, 1.0, 0.5])
+
+
+def _poses(trajectory: str, frames: int = 40):
+    _, rotations, positions = ground_truth_poses(SequenceSpec("t", trajectory, frames, seed=3))
+    return rotations, positions
+
+
+def _cost(params: np.ndarray, image_points: np.ndarray) -> float:
+    projected, _ = reprojection(CAMERA, SCENE.object_points(), params[:3], params[3:])
+    return float(np.sum(np.repeat(WEIGHTS, 2) * (projected - image_points).reshape(-1) ** 2))
+
+
+def _reference(image_points: np.ndarray, start: np.ndarray) -> np.ndarray:
+    """The weighted refinement as scipy's MINPACK Levenberg-Marquardt solves it."""
+    scale = np.repeat(np.sqrt(WEIGHTS), 2)
+    objects = SCENE.object_points()
+
+    def residuals(params):
+        projected, _ = reprojection(CAMERA, objects, params[:3], params[3:])
+        return scale * (projected - image_points).reshape(-1)
+
+    def jacobian(params):
+        return scale[:, None] * reprojection(CAMERA, objects, params[:3], params[3:])[1]
+
+    return least_squares(residuals, start, jac=jacobian, method="lm", xtol=1e-12, ftol=1e-12).x
+
+
+def _noisy_points(rng, rotation, position) -> np.ndarray:
+    exact = project_points(CAMERA, SCENE.object_points(), rotation, position)
+    return exact + rng.normal(0.0, 1.5, exact.shape)
+
+
+def _sqpnp(image_points: np.ndarray) -> np.ndarray:
+    _, rvec, tvec = cv2.solvePnP(
+        SCENE.object_points().reshape(-1, 1, 3),
+        image_points.reshape(-1, 1, 2),
+        CAMERA.matrix(),
+        CAMERA.distortion_array(),
+        flags=cv2.SOLVEPNP_SQPNP,
+    )
+    return np.concatenate([rvec.reshape(3), tvec.reshape(3)])
+
+
+def test_weighted_refinement_reaches_the_least_squares_minimum():
+    rng = np.random.default_rng(7)
+    for trajectory in ("circle", "figure_eight", "approach_retreat"):
+        rotations, positions = _poses(trajectory)
+        for frame in range(0, 40, 8):
+            points = _noisy_points(rng, rotations[frame], positions[frame])
+            start = _sqpnp(points)
+            ours = weighted_refinement(CAMERA, SCENE.object_points(), points, start, WEIGHTS)
+            reference = _reference(points, start)
+            np.testing.assert_allclose(ours, reference, atol=1e-7)
+            assert _cost(ours, points) <= _cost(reference, points) * (1 + 1e-9)
+
+
+def test_weighted_refinement_from_a_wrong_start_never_ends_worse():
+    """A start far from the pose (a wrong guess): every accepted step lowers the cost."""
+    rng = np.random.default_rng(3)
+    rotations, positions = _poses("circle")
+    points = _noisy_points(rng, rotations[10], positions[10])
+    good = _sqpnp(points)
+    for offset in ([0.3, -0.2, 0.1, 0.8, -0.5, 1.0], [0.0, 0.0, 0.0, 0.0, 0.0, 0.0]):
+        start = good + np.array(offset)
+        refined = weighted_refinement(CAMERA, SCENE.object_points(), points, start, WEIGHTS)
+        assert _cost(refined, points) <= _cost(start, points)
+    refined = weighted_refinement(CAMERA, SCENE.object_points(), points, good, WEIGHTS)
+    np.testing.assert_allclose(refined, _reference(points, good), atol=1e-7)
+
+
+def test_outlier_is_still_rejected_when_a_landmark_is_down_weighted():
+    """An aberrant (down-weighted) landmark sends the pose through the weighted refinement; a
+    landmark 40 px off is still found and left out, with the previous pose's help."""
+    rotations, positions = _poses("approach_retreat")
+    localizer = Localizer(SCENE)
+    first = project_points(CAMERA, SCENE.object_points(), rotations[0], positions[0])
+    localizer.estimate(0, dict(zip(SCENE.landmark_ids, map(tuple, first), strict=True)))
+    points = project_points(CAMERA, SCENE.object_points(), rotations[1], positions[1])
+    by_id = dict(zip(SCENE.landmark_ids, map(tuple, points), strict=True))
+    by_id["D"] = (by_id["D"][0] + 40.0, by_id["D"][1] - 15.0)
+    pose = localizer.estimate(1, by_id, aberrant={"B": True})
+    assert pose.valid, pose.reason
+    assert "D" not in pose.used_landmarks
+    assert pose.excluded_landmarks["D"].startswith("outlier: ")
+    assert math.isclose(
+        float(pose.excluded_landmarks["D"].split()[1]), math.hypot(40, 15), abs_tol=0.2
+    )
+    assert np.linalg.norm(pose.position - positions[1]) < 1e-3
