@@ -2,7 +2,9 @@
 thread, in one process, over the speed benchmark's rendered 1280x720 sequence.
 
 Prints the CPU milliseconds per frame of the pipeline's parts (tracking, decoding, the pose,
-the rest) and the profile's largest entries by their own time.
+the rest) and the profile's largest entries by their own time. cProfile sees this thread only:
+the frames `FrameCache` reads ahead are decoded on another thread, so decoding shows as the
+first two frames' and the waits for a frame not ready yet.
 
 python benchmarks/profile_localize.py [--frames 300] [--top 30]
 """
@@ -25,7 +27,8 @@ from speed import render_multi_sequence  # noqa: E402
 
 PARTS = (
     ("tracking (decoding included)", "groups.py", "advance"),
-    ("decoding", "frames.py", "_read_bgr"),
+    ("decoding (on this thread)", "frames.py", "_read_bgr"),
+    ("waiting for the frame read ahead (decoded on another thread)", "frames.py", "result"),
     ("pose", "pipeline.py", "_estimate_pose"),
     ("whole frame", "pipeline.py", "advance"),
 )
