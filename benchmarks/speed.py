@@ -19,6 +19,7 @@ Prints
     python benchmarks/speed.py                       # everything (about 10 min on 2 idle cores)
     python benchmarks/speed.py --skip-multi --skip-startup
     python benchmarks/speed.py --repeats 1 --max-frames 60 --skip-guard   # a quick look
+    python benchmarks/speed.py --skip-single --skip-multi --startup-runs 5  # start-up alone
 """
 
 from __future__ import annotations
@@ -26,6 +27,7 @@ from __future__ import annotations
 import argparse
 import json
 import os
+import statistics
 import subprocess
 import sys
 import tempfile
@@ -234,6 +236,31 @@ def time_to_first_frame(cache_dir: Path) -> float:
     return float(done.stdout.split()[-1]) - start
 
 
+def print_startup(runs: int) -> None:
+    """Time to the first tracked frame of a first process (empty caches) and of a second one
+    (the first one's caches), `runs` times on new caches; every run and the medians."""
+    firsts, seconds = [], []
+    for _ in range(max(runs, 1)):
+        with tempfile.TemporaryDirectory() as cache:
+            firsts.append(time_to_first_frame(Path(cache)))
+            seconds.append(time_to_first_frame(Path(cache)))
+    if len(firsts) == 1:
+        detail = (
+            f"first {firsts[0]:.2f} s (empty kernel cache: compiles), second {seconds[0]:.2f} s"
+        )
+    else:
+        detail = (
+            f"first {' '.join(f'{t:.2f}' for t in firsts)} s (median {statistics.median(firsts):.2f};"
+            f" empty kernel cache: compiles), second {' '.join(f'{t:.2f}' for t in seconds)} s"
+            f" (median {statistics.median(seconds):.2f})"
+        )
+    load = os.getloadavg()
+    print(
+        f"\ntime to first tracked frame (fresh python process): {detail} (cached kernels;"
+        f" load average after: {load[0]:.1f})"
+    )
+
+
 def guard(boxes_by_sequence: dict[str, np.ndarray]) -> bool:
     """Compare with the kept pre-optimisation boxes; print and return whether the guard passes.
 
@@ -293,6 +320,9 @@ def main() -> int:
     parser.add_argument("--skip-multi", action="store_true")
     parser.add_argument("--skip-startup", action="store_true")
     parser.add_argument("--skip-guard", action="store_true")
+    parser.add_argument(
+        "--startup-runs", type=int, default=1, help="first + second processes, each on new caches"
+    )
     args = parser.parse_args()
     if not SHARED.is_dir():
         print(f"needs {SHARED}", file=sys.stderr)
@@ -327,13 +357,7 @@ def main() -> int:
                     print_multi(sequence, threads, processes, pool, (threads, processes) == default)
 
     if not args.skip_startup:
-        with tempfile.TemporaryDirectory() as cache:
-            first = time_to_first_frame(Path(cache))
-            second = time_to_first_frame(Path(cache))
-        print(
-            f"\ntime to first tracked frame (fresh python process): first {first:.2f} s "
-            f"(empty kernel cache: compiles), second {second:.2f} s (cached kernels)"
-        )
+        print_startup(args.startup_runs)
 
     ok = True
     if result is not None and not args.skip_guard:
