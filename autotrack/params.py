@@ -147,8 +147,9 @@ class TrackerParams:
     needs 1.65x (e^0.5) the appearance evidence of the other."""
     rotation_step: float = 0.0
     """In-plane rotation (rotation.py): each frame the target is searched at its current angle
-    and this many degrees either way, in patches sampled in the target's turned frame, and the
-    angle with the highest peak is taken; 0 = the release's axis-aligned patches. 10: half an
+    and this many degrees either way, in patches sampled in the target's turned frame, and a
+    turned angle is taken when its peak is higher by `rotation_margin` and its response as sharp
+    (rotation.turn_wins); 0 = the release's axis-aligned patches. 10: half an
     fHOG orientation bin (20 degrees), the smallest turn that moves a gradient's energy into the
     neighbouring bin. Measured, not in `autotrack+` (docs/tracker.md)."""
     rotation_margin: float = 0.05

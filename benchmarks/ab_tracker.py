@@ -8,6 +8,10 @@ response map is identical (the faithful preset must stay bit for bit).
 
 python benchmarks/ab_tracker.py integration3
 python benchmarks/ab_tracker.py HEAD~1 --frames 100 --preset autotrack+
+python benchmarks/ab_tracker.py integration3 --preset autotrack+ --this rotation_step=10
+
+`--this NAME=VALUE,...` changes parameters of this checkout's side only (the cost of a switch
+against the revision's preset; the boxes then differ).
 """
 
 from __future__ import annotations
@@ -22,6 +26,7 @@ import sys
 import tarfile
 import tempfile
 import time
+from dataclasses import fields, replace
 from pathlib import Path
 
 import cv2
@@ -60,16 +65,33 @@ def extract_revision(revision: str, folder: Path) -> None:
         path.write_text(renamed)
 
 
-def compare(base, new, sequence_dir: Path, preset_name: str, frames: int) -> tuple:
+def parse_overrides(text: str) -> dict:
+    """`NAME=VALUE,...` as TrackerParams overrides, each value of its field's type."""
+    from autotrack.params import TrackerParams
+
+    types = {
+        field.name: type(getattr(TrackerParams(), field.name)) for field in fields(TrackerParams)
+    }
+    overrides = {}
+    for item in filter(None, text.split(",")):
+        name, _, value = item.partition("=")
+        if name not in types:
+            raise ValueError(f"no tracker parameter {name!r}")
+        kind = types[name]
+        overrides[name] = value in ("1", "true", "True") if kind is bool else kind(value)
+    return overrides
+
+
+def compare(base, new, sequence_dir: Path, preset_name: str, frames: int, overrides: dict) -> tuple:
     """(base ms, new ms, identical, updates) on one sequence."""
     from autotrack.evaluation.datasets import load_otb_sequence
     from autotrack.io.frames import read_image
 
     sequence = load_otb_sequence(sequence_dir)[0]
     images = [read_image(path) for path in sequence.frame_paths[: frames + 1]]
-    trackers = [
-        module.AutoTrack(module.preset(preset_name, str(COLOUR_TABLE))) for module in (base, new)
-    ]
+    params = [module.preset(preset_name, str(COLOUR_TABLE)) for module in (base, new)]
+    params[1] = replace(params[1], **overrides)
+    trackers = [module.AutoTrack(p) for module, p in zip((base, new), params, strict=True)]
     for tracker in trackers:
         tracker.init(images[0], sequence.init_box)
     spent = [0.0, 0.0]
@@ -92,7 +114,13 @@ def main() -> int:
     parser.add_argument("revision", help="git revision to compare with (e.g. integration3)")
     parser.add_argument("--frames", type=int, default=150, help="updates per sequence")
     parser.add_argument("--preset", default="autotrack")
+    parser.add_argument("--this", default="", help="NAME=VALUE,... for this checkout only")
     args = parser.parse_args()
+    try:
+        overrides = parse_overrides(args.this)
+    except ValueError as error:
+        print(f"--this: {error}", file=sys.stderr)
+        return 2
     if not COLOUR_TABLE.is_file():
         print(f"needs {COLOUR_TABLE}", file=sys.stderr)
         return 2
@@ -115,7 +143,7 @@ def main() -> int:
             if not sequence_dir.is_dir():
                 continue
             base_ms, new_ms, identical, updates = compare(
-                base, new, sequence_dir, args.preset, args.frames
+                base, new, sequence_dir, args.preset, args.frames, overrides
             )
             print(
                 f"  {name:<14} {args.revision} {base_ms:6.3f} ms  this {new_ms:6.3f} ms  "

@@ -25,7 +25,7 @@ from autotrack.io.frames import read_image
 from autotrack.tracker import scale, tracker
 
 STEPS = (
-    (tracker.AutoTrack, "_features_spectrum", "search patch, features, window, FFT"),
+    (tracker.AutoTrack, "_spectrum", "features, window, FFT"),
     (tracker.dcf, "detection_response", "detection response (eq. 16)"),
     (tracker.dcf, "newton_peak", "Newton sub-cell peak"),
     (tracker.AutoTrack, "_regularize", "variations, eta, ASR (eqs. 2-4)"),

@@ -19,6 +19,7 @@ Prints
     python benchmarks/speed.py                       # everything (about 10 min on 2 idle cores)
     python benchmarks/speed.py --skip-multi --skip-startup
     python benchmarks/speed.py --repeats 1 --max-frames 60 --skip-guard   # a quick look
+    python benchmarks/speed.py --trackers autotrack+,csrt --plus rotation_step=10 --skip-multi
     python benchmarks/speed.py --skip-single --skip-multi --startup-runs 5  # start-up alone
 """
 
@@ -46,6 +47,8 @@ COLOUR_TABLE = SHARED / "color_names" / "cn_norm_32768x10.npy"
 REFERENCE = ROOT / "benchmarks" / "reference_boxes"
 TOLERANCE_PX = 0.5
 MULTI_SEED = 3
+VARIANT = "autotrack+*"
+"""`--plus`'s tracker: `autotrack+` with the given parameters (a switch's cost against CSRT)."""
 
 for _name in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS", "NUMBA_NUM_THREADS"):
     os.environ.setdefault(_name, "1")
@@ -108,6 +111,11 @@ def print_single_target(result: dict) -> None:
             f"range {min(ratios):.2f}-{max(ratios):.2f}; ratio of medians "
             f"{medians['autotrack'] / medians['csrt']:.2f}x)"
         )
+    for tracker in (t for t in fps if t not in ("autotrack", "csrt") and "csrt" in fps):
+        ratios = [
+            np.median(fps[tracker][name]) / np.median(fps["csrt"][name]) for name in fps[tracker]
+        ]
+        print(f"{tracker} / CSRT: {np.median(ratios):.2f}x (median of per-sequence ratios)")
 
 
 def render_multi_sequence(folder: Path, frames: int) -> Path:
@@ -310,6 +318,23 @@ def guard(boxes_by_sequence: dict[str, np.ndarray]) -> bool:
     return ok and bool(np.all(drift <= 0.01))
 
 
+def register_variant(overrides: str) -> bool:
+    """Add VARIANT, `autotrack+` with `overrides` (NAME=VALUE,...), to the presets for this run;
+    False (and one line on stderr) for an unknown parameter."""
+    from dataclasses import replace
+
+    from ab_tracker import parse_overrides  # benchmarks/ is the script's folder
+
+    from autotrack.params import PRESETS
+
+    try:
+        PRESETS[VARIANT] = replace(PRESETS["autotrack+"], **parse_overrides(overrides))
+    except ValueError as error:
+        print(f"--plus: {error}", file=sys.stderr)
+        return False
+    return True
+
+
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--trackers", default="autotrack,csrt", help="interleaved, one thread")
@@ -320,6 +345,11 @@ def main() -> int:
     parser.add_argument("--skip-multi", action="store_true")
     parser.add_argument("--skip-startup", action="store_true")
     parser.add_argument("--skip-guard", action="store_true")
+    parser.add_argument(
+        "--plus",
+        default="",
+        help="NAME=VALUE,...: also time `autotrack+*`, autotrack+ with these parameters",
+    )
     parser.add_argument(
         "--startup-runs", type=int, default=1, help="first + second processes, each on new caches"
     )
@@ -338,6 +368,10 @@ def main() -> int:
 
         cv2.setNumThreads(1)
         trackers = [t.strip() for t in args.trackers.split(",") if t.strip()]
+        if args.plus:
+            if not register_variant(args.plus):
+                return 2
+            trackers.append(VARIANT)
         print(f"\nsingle target, {args.repeats} interleaved repeats per sequence:")
         result = single_target(trackers, args.repeats, args.max_frames)
         print_single_target(result)

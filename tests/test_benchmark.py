@@ -288,3 +288,14 @@ def test_colour_table_reaches_the_autotrack_variants_and_the_json(tmp_path):
     # The saved result is tied to that colour feature: without the table it is rerun.
     assert load_result(tmp_path, "strcf+asr", sequence, "lab11") is None
     assert load_result(tmp_path, "strcf+asr", sequence, f"table:{table}") is not None
+
+
+def test_ab_tracker_overrides_take_each_parameters_type():
+    from benchmarks.ab_tracker import parse_overrides
+
+    parsed = parse_overrides("rotation_step=10,robust_variation=1,num_aspects=17")
+    assert parsed == {"rotation_step": 10.0, "robust_variation": True, "num_aspects": 17}
+    assert isinstance(parsed["rotation_step"], float) and isinstance(parsed["num_aspects"], int)
+    assert parse_overrides("") == {}
+    with pytest.raises(ValueError, match="no tracker parameter 'rotation'"):
+        parse_overrides("rotation=10")

@@ -104,8 +104,10 @@ def test_angle_pool_follows_a_turning_target(seed):
     turned = np.array(
         [rotation.wrapped(a - t) for a, t in zip(angles, sequence.angles, strict=True)]
     )
-    # The last third of the turn (140-245 degrees): the estimate stays within one step.
-    assert np.all(np.abs(turned[-12:]) <= 10.0), turned
+    # The last third of the turn (140-245 degrees): the estimate stays within one and a half
+    # steps (the filter learns part of each turn, and a turn is taken only on a response as
+    # sharp: seed 5 lags 14 degrees on one frame, 7 without that check).
+    assert np.all(np.abs(turned[-12:]) <= 15.0), turned
     assert np.mean(_centre_errors(boxes, sequence.boxes)[-12:]) < 5.0
 
 
@@ -126,3 +128,41 @@ def test_turning_target_overlaps_better_with_the_rotation():
             boxes, _ = _track(replace(PRESETS["autotrack+"], rotation_step=step), sequence)
             errors.append(np.mean(_centre_errors(boxes, sequence.boxes)))
     assert np.mean(with_rotation) < np.mean(without)
+
+
+def _response(peak: float, sidelobe: float = 0.0) -> tuple[np.ndarray, tuple[float, float, float]]:
+    """A 50 x 50 response: a Gaussian peak at the origin over a little noise, and optionally a
+    broad second hill of height `sidelobe` away from it (the detection triple of the peak)."""
+    rows, cols = np.mgrid[0:50, 0:50]
+    noise = np.random.default_rng(0).uniform(0.0, 0.02, (50, 50))
+    response = peak * np.exp(-((rows - 25.0) ** 2 + (cols - 25.0) ** 2) / 8.0) + noise
+    response += sidelobe * np.exp(-((rows - 10.0) ** 2 + (cols - 40.0) ** 2) / 60.0)
+    return np.fft.ifftshift(response), (0.0, 0.0, float(response.max()))
+
+
+def test_turn_wins_with_a_higher_peak_over_the_same_sidelobes_only():
+    current = _response(1.0)
+    assert rotation.turn_wins(_response(1.2), current, 0.05)
+    # Not higher by the margin.
+    assert not rotation.turn_wins(_response(1.03), current, 0.05)
+    # Higher, but the sidelobes rose with it: a flatter response (lower APCE) does not turn.
+    assert not rotation.turn_wins(_response(1.2, sidelobe=0.9), current, 0.05)
+
+
+def test_one_sampler_resamples_the_region_once_for_every_angle(monkeypatch):
+    image = _textured_image().astype(np.uint8)
+    args = ((120.0, 160.0), (150, 150), (100, 100))
+    fresh = [rotation.TurnedSampler(image, *args).patch(a) for a in (10.0, -10.0, 0.0)]
+    resamplings = []
+
+    def counted(*call):
+        resamplings.append(call[2])
+        return search_patch(*call)
+
+    monkeypatch.setattr(rotation, "search_patch", counted)
+    sampler = rotation.TurnedSampler(image, *args)
+    shared = [sampler.patch(a) for a in (10.0, -10.0, 0.0)]
+    for one, other in zip(fresh, shared, strict=True):
+        np.testing.assert_array_equal(one, other)
+    # One resampling of the enlarged region for both turned angles, one plain patch at 0.
+    assert len(resamplings) == 2 and resamplings[0] != resamplings[1]

@@ -17,6 +17,7 @@ import math
 import cv2
 import numpy as np
 
+from autotrack.tracker.robust import apce
 from autotrack.tracker.sampling import search_patch
 
 
@@ -48,6 +49,47 @@ def _warp(source: np.ndarray, matrix: np.ndarray, size_hw: tuple[int, int]) -> n
     )
 
 
+class TurnedSampler:
+    """`sampling.search_patch` of one frame's search region in the frame turned by any angle.
+
+    The search region is resampled once (area averaging, as the release) with a margin that
+    covers its turned corners, on the first turned patch asked for, then turned at the patch's
+    resolution per angle: one area resampling of ~2x the output's area per frame, shared by the
+    current angle's patch and the trial angles', and one small warp per angle, instead of a
+    warp at the image's resolution. The patch at angle 0 is `search_patch` itself.
+    """
+
+    def __init__(
+        self,
+        image: np.ndarray,
+        position: tuple[float, float],
+        region_size_hw: tuple[int, int],
+        output_size_hw: tuple[int, int],
+    ) -> None:
+        self.image, self.position = image, position
+        self.region_size_hw = region_size_hw
+        self.rows, self.cols = int(output_size_hw[0]), int(output_size_hw[1])
+        margin = math.ceil(max(self.rows, self.cols) * (math.sqrt(2.0) - 1.0) / 2.0)
+        self.big_hw = (self.rows + 2 * margin, self.cols + 2 * margin)
+        self.big: np.ndarray | None = None
+
+    def patch(self, angle_deg: float) -> np.ndarray:
+        """The search patch in the frame turned by `angle_deg`."""
+        if angle_deg == 0.0:
+            output = (self.rows, self.cols)
+            return search_patch(self.image, self.position, self.region_size_hw, output)
+        big_hw = self.big_hw
+        if self.big is None:
+            factor = (big_hw[0] / self.rows, big_hw[1] / self.cols)
+            region = self.region_size_hw
+            bigger = (round(region[0] * factor[0]), round(region[1] * factor[1]))
+            self.big = search_patch(self.image, self.position, bigger, big_hw)
+        source_centre = ((big_hw[1] - 1) / 2.0, (big_hw[0] - 1) / 2.0)
+        output_centre = ((self.cols - 1) / 2.0, (self.rows - 1) / 2.0)
+        matrix = _inverse_map(angle_deg, source_centre, output_centre)
+        return _warp(self.big, matrix, (self.rows, self.cols))
+
+
 def rotated_search_patches(
     image: np.ndarray,
     position: tuple[float, float],
@@ -55,31 +97,9 @@ def rotated_search_patches(
     output_size_hw: tuple[int, int],
     angles_deg: tuple[float, ...],
 ) -> list[np.ndarray]:
-    """`sampling.search_patch` in the frame rotated by each angle (the same patch at 0).
-
-    The search region is resampled once (area averaging, as the release) with a margin that
-    covers its rotated corners, then rotated at the patch's resolution for each angle: one
-    area resampling of ~2x the output's area and one small warp per angle, instead of a warp
-    at the image's resolution.
-    """
-    rows, cols = int(output_size_hw[0]), int(output_size_hw[1])
-    margin = math.ceil(max(rows, cols) * (math.sqrt(2.0) - 1.0) / 2.0)
-    big_hw = (rows + 2 * margin, cols + 2 * margin)
-    big = None
-    patches = []
-    for angle in angles_deg:
-        if angle == 0.0:
-            patches.append(search_patch(image, position, region_size_hw, output_size_hw))
-            continue
-        if big is None:
-            factor = (big_hw[0] / rows, big_hw[1] / cols)
-            region = (round(region_size_hw[0] * factor[0]), round(region_size_hw[1] * factor[1]))
-            big = search_patch(image, position, region, big_hw)
-        source_centre = ((big_hw[1] - 1) / 2.0, (big_hw[0] - 1) / 2.0)
-        output_centre = ((cols - 1) / 2.0, (rows - 1) / 2.0)
-        matrix = _inverse_map(angle, source_centre, output_centre)
-        patches.append(_warp(big, matrix, (rows, cols)))
-    return patches
+    """`sampling.search_patch` in the frame turned by each angle (the same patch at 0)."""
+    sampler = TurnedSampler(image, position, region_size_hw, output_size_hw)
+    return [sampler.patch(angle) for angle in angles_deg]
 
 
 def upright_view(
@@ -102,6 +122,23 @@ def candidate_angles(angle_deg: float, step_deg: float) -> tuple[float, ...]:
     if not step_deg:
         return (angle_deg,)
     return (angle_deg, angle_deg + step_deg, angle_deg - step_deg)
+
+
+def turn_wins(turned: tuple, current: tuple, margin: float) -> bool:
+    """Whether a turned sample's detection, (response, (row, col, peak)), beats the current
+    angle's: a peak higher by `margin` and a response at least as sharp (APCE, robust.apce).
+
+    A turn of the whole target makes the turned sample match the filter as the target did
+    before the turn: a higher peak over sidelobes no higher, so a sharper response. A turned
+    sample whose peak rises with its sidelobes (APCE not higher) matches more of everything in
+    the patch, background or another part of the target, rather than the target turned back
+    into the filter's frame.
+    """
+    turned_response, (_, _, turned_peak) = turned
+    current_response, (_, _, current_peak) = current
+    if turned_peak <= current_peak * (1.0 + margin):
+        return False
+    return apce(turned_response) >= apce(current_response)
 
 
 def wrapped(angle_deg: float) -> float:

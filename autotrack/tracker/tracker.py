@@ -185,7 +185,8 @@ class AutoTrack:
             self.motion.observe(moved)
         # A low-confidence frame (occluder, loss) changes neither the filter nor the scale.
         if confident:
-            best_scale, self.scale = self.scale_filter.detect(*self._upright(image), self.scale)
+            upright = self._upright(image)
+            best_scale, self.scale = self.scale_filter.detect(*upright, self.scale)
             self._detect_aspect(image)
 
         # Train on the detection features moved to the new position (release's reuse).
@@ -198,7 +199,9 @@ class AutoTrack:
             if self.memory is not None and not ambiguous:
                 self.memory.learn(self.filter_f)
         if confident:
-            self.scale_filter.update(*self._upright(image), self.scale, best_scale)
+            if self.aspect_filter is not None:
+                upright = self._upright(image)  # the view's side follows the new shape
+            self.scale_filter.update(*upright, self.scale, best_scale)
             if self.aspect_filter is not None:
                 self.aspect_filter.update(image, self.position, self._box_size_hw())
 
@@ -329,55 +332,53 @@ class AutoTrack:
     def _detect(self, image: np.ndarray):
         """(features spectrum, response, (row, col, peak)) at the current angle; with
         `rotation_step`, when that peak fell below the last frame's (a turn lowers the match) or
-        the target turned on the last frame, one step either way is tried and taken if its peak
-        beats it by `rotation_margin`."""
+        the target turned on the last frame, one step either way is tried and taken if it wins
+        (`rotation.turn_wins`: a peak higher by `rotation_margin`, a response as sharp)."""
         p = self.params
-        zf = self._features_spectrum(image)
-        response = dcf.detection_response(self.filter_f, zf, self.grid_size)
-        best = (zf, response, dcf.newton_peak(response, p.newton_iterations))
+        sampler = self._sampler(image)
+        best = self._detect_patch(sampler.patch(self.angle))
         last_peak, self.last_peak = self.last_peak, best[2][2]
         if not p.rotation_step or (best[2][2] >= last_peak and not self.turning):
             return best
-        angles = rotation.candidate_angles(self.angle, p.rotation_step)[1:]
         best_angle = self.angle
-        for angle, zf in zip(angles, self._features_spectra(image, angles), strict=True):
-            response = dcf.detection_response(self.filter_f, zf, self.grid_size)
-            peak = dcf.newton_peak(response, p.newton_iterations)
-            if peak[2] > best[2][2] * (1.0 + p.rotation_margin):
-                best, best_angle = (zf, response, peak), angle
+        for angle in rotation.candidate_angles(self.angle, p.rotation_step)[1:]:
+            turned = self._detect_patch(sampler.patch(angle))
+            if rotation.turn_wins(turned[1:], best[1:], p.rotation_margin):
+                best, best_angle = turned, angle
         self.turning = best_angle != self.angle
         self.angle = rotation.wrapped(best_angle)
         return best
 
+    def _detect_patch(self, patch: np.ndarray):
+        """(features spectrum, response, (row, col, peak)) of one search patch (eq. 16)."""
+        zf = self._spectrum(patch)
+        response = dcf.detection_response(self.filter_f, zf, self.grid_size)
+        return zf, response, dcf.newton_peak(response, self.params.newton_iterations)
+
     def _upright(self, image: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(image, position) for the scale filter: the frame itself, or with the target turned,
-        a view around it turned upright that holds the largest scale sample."""
+        a view around it turned upright that holds the largest scale sample of this frame's
+        scale search and of the update after it (one step further)."""
         if self.angle == 0.0:
             return image, self.position
-        largest = (
-            np.max(self.scale_filter.base_target_size_hw)
-            * self.scale
-            * self.scale_filter.scale_steps[0]
-        )
+        steps = self.scale_filter.scale_steps[0] ** 2
+        largest = np.max(self.scale_filter.base_target_size_hw) * self.scale * steps
         side = int(math.ceil(largest * math.sqrt(2.0))) + 2
         return rotation.upright_view(image, self.position, self.angle, side)
 
-    def _features_spectra(self, image: np.ndarray, angles: tuple[float, ...]) -> list:
-        """The windowed feature spectra of the search region sampled at each angle."""
+    def _sampler(self, image: np.ndarray) -> rotation.TurnedSampler:
+        """This frame's search region at the current position and scale, at any angle."""
         region = dcf.matlab_round(self.window_size * self.scale).astype(int)
         output = (int(self.window_size[0]), int(self.window_size[1]))
-        patches = rotation.rotated_search_patches(
-            image, self.position, (region[0], region[1]), output, angles
-        )
-        return [
-            self.transform.forward_windowed(
-                extract_features(patch, self.params, self.colour_table), self.cos_window
-            )
-            for patch in patches
-        ]
+        return rotation.TurnedSampler(image, self.position, (region[0], region[1]), output)
+
+    def _spectrum(self, patch: np.ndarray) -> np.ndarray:
+        """The windowed feature spectrum of a search patch."""
+        features = extract_features(patch, self.params, self.colour_table)
+        return self.transform.forward_windowed(features, self.cos_window)
 
     def _features_spectrum(self, image: np.ndarray) -> np.ndarray:
-        return self._features_spectra(image, (self.angle,))[0]
+        return self._spectrum(self._sampler(image).patch(self.angle))
 
     def _theta_update(
         self, theta_ref: float, filter_prev: np.ndarray
@@ -419,14 +420,8 @@ class AutoTrack:
         if not p.num_aspects:
             return None
         self.aspect_filter = None  # _box_size_hw: the first frame's shape
-        aspect = AspectFilter(
-            p.num_aspects,
-            p.scale_step,
-            p.scale_sigma_factor,
-            p.scale_lambda,
-            p.scale_learning_rate,
-            self.scale_filter.model_size_hw,
-        )
+        settings = (p.scale_step, p.scale_sigma_factor, p.scale_lambda, p.scale_learning_rate)
+        aspect = AspectFilter(p.num_aspects, *settings, self.scale_filter.model_size_hw)
         aspect.update(image, self.position, self._box_size_hw())
         return aspect
 
