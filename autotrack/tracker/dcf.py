@@ -11,7 +11,6 @@ FFT runs over contiguous memory.
 
 from __future__ import annotations
 
-import sys
 from dataclasses import dataclass
 from functools import lru_cache
 
@@ -19,28 +18,10 @@ import numpy as np
 import scipy.fft
 from numba import njit
 
-from autotrack.tracker import admm_kernels
+from autotrack.tracker import admm_kernels, fft_plans
+from autotrack.tracker.fft_plans import pyfftw
 
 _FFT_AXES = (-2, -1)
-
-
-def _import_pyfftw():
-    """pyFFTW without its dask interface: when dask is installed, `import pyfftw` imports
-    dask.array (~0.4 s of a fresh process's start-up) for `pyfftw.interfaces.dask_fft`, which
-    the tracker never uses. A None entry in sys.modules makes that optional import fail fast."""
-    blocked = "dask.array.fft" not in sys.modules
-    if blocked:
-        sys.modules["dask.array.fft"] = None
-    try:
-        import pyfftw
-        import pyfftw.builders
-    finally:
-        if blocked:
-            del sys.modules["dask.array.fft"]
-    return pyfftw
-
-
-pyfftw = _import_pyfftw()
 
 
 def matlab_round(values: np.ndarray | float) -> np.ndarray:
@@ -99,38 +80,23 @@ class SpectrumTransform:
     """Planned FFTW real transforms of (channels, rows, cols) float32 maps, one thread.
 
     The hot path of a tracker runs 2 * admm_iterations - 1 multi-channel transforms per frame
-    of a fixed shape; FFTW plans made once per tracker are about twice as fast as pocketfft.
-    Plans are estimated, not measured: measured plans (FFTW_MEASURE/PATIENT, 1.3-1.8x faster
-    on 50 x 50 grids) depend on the timings of the moment, and a different plan rounds
-    differently, which this chaotic tracker turns into different boxes from run to run.
+    of a fixed shape. The plans are measured once per machine and shape and kept as FFTW wisdom
+    on disk (`fft_plans`), so every tracker, thread and child process of this machine uses the
+    same plans (the same rounding); estimated plans when that file cannot be used.
     """
 
     def __init__(self, channels: int, grid_size: tuple[int, int]) -> None:
         self.grid_size = grid_size
         rows, cols = grid_size
-        self._forward = pyfftw.builders.rfft2(
-            np.empty((channels, rows, cols), np.float32),
-            axes=_FFT_AXES,
-            threads=1,
-            planner_effort="FFTW_ESTIMATE",
-        )
-        self._inverse = pyfftw.builders.irfft2(
-            np.empty((channels, rows, cols // 2 + 1), np.complex64),
-            s=grid_size,
-            axes=_FFT_AXES,
-            threads=1,
-            planner_effort="FFTW_ESTIMATE",
-        )
+        plans = fft_plans.plans_for(channels, grid_size)
+        self.effort = plans.effort
+        self._forward = plans.forward
+        self._inverse = plans.inverse
         self._spectrum_shape = (channels, rows, cols // 2 + 1)
-        # The h-step's own forward plan on its own buffers (the same estimated plan as
-        # `_forward`, so the same rounding): its input is written in place by a kernel, and
-        # `forward` re-targeting `_forward`'s output array cannot touch a live h spectrum.
-        self._h_forward = pyfftw.builders.rfft2(
-            np.empty((channels, rows, cols), np.float32),
-            axes=_FFT_AXES,
-            threads=1,
-            planner_effort="FFTW_ESTIMATE",
-        )
+        # The h-step's own forward plan on its own buffers (the same plan as `_forward`, so the
+        # same rounding): its input is written in place by a kernel, and `forward` re-targeting
+        # `_forward`'s output array cannot touch a live h spectrum.
+        self._h_forward = plans.h_forward
 
     def forward(self, maps: np.ndarray) -> np.ndarray:
         """Half spectra of real maps (a new complex64 array)."""
