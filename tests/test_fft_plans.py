@@ -12,6 +12,9 @@ import subprocess
 import sys
 import time
 
+import numpy as np
+
+from autotrack.tracker import dcf, fft_plans
 from autotrack.tracker.fft_plans import WISDOM_ENV
 
 _PLAN_SCRIPT = """
@@ -99,3 +102,28 @@ def test_an_unwritable_wisdom_place_gives_estimated_plans(tmp_path):
     assert run["effort"] == "FFTW_ESTIMATE"
     assert run["round_trip"] < 1e-4
     assert blocker.read_text().startswith("a file")
+
+
+def test_odd_sides_and_large_prime_factors_go_to_pocketfft():
+    assert [side for side in range(38, 51) if fft_plans.prefers_pocketfft(side)] == [
+        38, 39, 41, 43, 45, 46, 47, 49,
+    ]  # fmt: skip
+    assert fft_plans.largest_prime_factor(46) == 23
+    assert dcf.SpectrumTransform(3, (47, 40)).effort == "pocketfft"
+    assert dcf.SpectrumTransform(3, (40, 40)).effort != "pocketfft"
+
+
+def test_both_backends_compute_the_same_transforms():
+    rng = np.random.default_rng(3)
+    for grid in ((47, 47), (38, 40), (40, 40)):
+        maps = rng.standard_normal((4, *grid)).astype(np.float32)
+        transform = dcf.SpectrumTransform(4, grid)
+        spectrum = transform.forward(maps)
+        expected = np.fft.rfft2(maps.astype(np.float64))
+        np.testing.assert_allclose(spectrum, expected, rtol=0, atol=2e-4 * np.abs(expected).max())
+        gain = rng.uniform(0.1, 1.0, grid).astype(np.float32)
+        projected = transform.project(spectrum, spectrum * 0.5, 2.0, gain)
+        spatial = np.fft.irfft2(3.0 * expected, s=grid) * gain
+        np.testing.assert_allclose(
+            projected, np.fft.rfft2(spatial), rtol=0, atol=2e-4 * np.abs(expected).max()
+        )

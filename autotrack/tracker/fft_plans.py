@@ -33,6 +33,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
+import scipy.fft
 
 from autotrack.compile_cache import cache_root
 from autotrack.io.atomic import write_text
@@ -79,7 +80,7 @@ class PlanSet:
     h_forward: object
     """A second r2c plan on its own arrays (the same plan as `forward`)."""
     effort: str
-    """"FFTW_MEASURE" (from the wisdom file) or "FFTW_ESTIMATE" (the fallback)."""
+    """"FFTW_MEASURE" (from the wisdom file), "FFTW_ESTIMATE" (the fallback) or "pocketfft"."""
 
 
 class _Planner:
@@ -189,9 +190,60 @@ def _plan_from_file(shape: tuple[int, int, int], path: Path) -> tuple:
         return plans
 
 
+def largest_prime_factor(n: int) -> int:
+    """The largest prime dividing n (n itself for a prime, 1 for n < 2)."""
+    largest, factor = 1, 2
+    while factor * factor <= n:
+        while n % factor == 0:
+            largest, n = factor, n // factor
+        factor += 1
+    return max(largest, n) if n > 1 else largest
+
+
+def prefers_pocketfft(side: int) -> bool:
+    """Whether a grid side transforms faster with pocketfft than with a measured FFTW plan.
+
+    FFTW is fastest on even sides made of small primes; on odd sides and sides with a large
+    prime factor its plans (Rader, generic codelets) are 1.1-1.6x slower than pocketfft's
+    (the table in docs/benchmarks.md, 42 channels, sides 38-50). A rule on the side, not a
+    timing, so the choice is the same in every process and on every machine.
+    """
+    return side % 2 == 1 or largest_prime_factor(side) > 11
+
+
+class PocketPlan:
+    """scipy.fft's pocketfft behind the part of a pyFFTW plan the tracker uses: an input array
+    of its own, and a call that transforms it (or the array given) into a new array (an output
+    array, if given, is not used)."""
+
+    def __init__(self, input_array: np.ndarray, inverse_size: tuple[int, int] | None = None):
+        self.input_array = input_array
+        self._inverse_size = inverse_size
+
+    def __call__(self, input_array: np.ndarray | None = None, output_array=None) -> np.ndarray:
+        source = self.input_array if input_array is None else input_array
+        if self._inverse_size is None:
+            return scipy.fft.rfft2(source, axes=_AXES, workers=1)
+        return scipy.fft.irfft2(source, s=self._inverse_size, axes=_AXES, workers=1)
+
+
+def _pocket_plans(shape: tuple[int, int, int]) -> PlanSet:
+    channels, rows, cols = shape
+    spectrum = np.empty((channels, rows, cols // 2 + 1), np.complex64)
+    return PlanSet(
+        PocketPlan(np.empty(shape, np.float32)),
+        PocketPlan(spectrum, (rows, cols)),
+        PocketPlan(np.empty(shape, np.float32)),
+        effort="pocketfft",
+    )
+
+
 def plans_for(channels: int, grid_size: tuple[int, int]) -> PlanSet:
-    """Forward, inverse and second forward plans of (channels, *grid_size), one thread each."""
+    """Forward, inverse and second forward plans of (channels, *grid_size), one thread each:
+    pocketfft where `prefers_pocketfft`, FFTW plans (measured, or estimated) elsewhere."""
     shape = (int(channels), int(grid_size[0]), int(grid_size[1]))
+    if prefers_pocketfft(shape[1]) or prefers_pocketfft(shape[2]):
+        return _pocket_plans(shape)
     with _planner.lock:
         effort = _planner.efforts.get(shape)
         if effort == "FFTW_MEASURE":
