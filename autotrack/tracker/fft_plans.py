@@ -108,14 +108,18 @@ def wisdom_path() -> Path:
 
 def _machine_key() -> str:
     """The CPU kind: FFTW wisdom names SIMD codelets, and a plan is only valid on like CPUs."""
-    model = platform.processor() or ""
+    found = {"model name": "", "flags": ""}  # the first CPU's: not the CPU count
     try:
         with open("/proc/cpuinfo", encoding="utf-8", errors="replace") as handle:
             for line in handle:
-                if line.startswith(("model name", "flags")):
-                    model += line
+                key = line.split(":", 1)[0].strip()
+                if key in found and not found[key]:
+                    found[key] = line
+                if all(found.values()):
+                    break
     except OSError:
         pass
+    model = (platform.processor() or "") + found["model name"] + found["flags"]
     digest = hashlib.sha256(model.encode()).hexdigest()[:12]
     return f"{platform.machine() or 'cpu'}-{digest}"
 
