@@ -1,6 +1,6 @@
-"""Compiled element-wise steps of the ADMM loop (dcf.train_filter) and of the detection.
+"""Compiled element-wise steps of the ADMM loop (dcf.train_filter), bit for bit numpy's.
 
-Each kernel but `conj_product_sum` fuses what numpy computed as several whole-array operations with temporaries into
+Each kernel fuses what numpy computed as several whole-array operations with temporaries into
 one pass, following numpy's operation order and precision exactly: float32 / complex64
 arithmetic, one rounding per numpy operation, products of complex numbers only by real scalars
 (numpy multiplies two complex64 arrays with fused multiply-adds where the CPU has them, which
@@ -15,7 +15,6 @@ maps, C-contiguous.
 
 from __future__ import annotations
 
-import numpy as np
 from numba import njit
 
 
@@ -66,23 +65,3 @@ def update_multiplier(l_f, g_f, h_f, gamma):
             for c in range(cols):
                 step = g_f[k, r, c] - h_f[k, r, c]
                 l_f[k, r, c] += complex(gamma * step.real, gamma * step.imag)
-
-
-@njit(cache=True, nogil=True, fastmath=False)
-def conj_product_sum(a_f, b_f, out):
-    """out = sum_k conj(a_k) b_k per frequency (complex64), channel after channel; numpy:
-    np.sum(np.conj(a_f) * b_f, axis=0), which rounds its complex products differently (with
-    fused multiply-adds where the CPU has them): equal to float32 rounding, not bit for bit.
-    The detection's correlation (eq. 16) and the training's sum_k conj(x_k) g_prev_k."""
-    channels, rows, cols = a_f.shape
-    acc_re = np.zeros((rows, cols), np.float32)
-    acc_im = np.zeros((rows, cols), np.float32)
-    for k in range(channels):
-        for r in range(rows):
-            for c in range(cols):
-                a, b = a_f[k, r, c], b_f[k, r, c]
-                acc_re[r, c] += a.real * b.real + a.imag * b.imag
-                acc_im[r, c] += a.real * b.imag - a.imag * b.real
-    for r in range(rows):
-        for c in range(cols):
-            out[r, c] = complex(acc_re[r, c], acc_im[r, c])

@@ -298,8 +298,7 @@ def train_filter(
     l_f = np.zeros_like(xf)
     s_xx = np.empty(xf.shape[1:], np.float32)
     admm_kernels.channel_energy(xf, s_xx)
-    s_gx_prev = np.empty(xf.shape[1:], np.complex64)
-    admm_kernels.conj_product_sum(xf, g_prev, s_gx_prev)
+    s_gx_prev = np.sum(np.conj(xf) * g_prev, axis=0)
     gamma = float(settings.gamma_init)
     theta = float(theta_start)
     for iteration in range(1, settings.iterations + 1):
@@ -320,8 +319,7 @@ def train_filter(
 
 def detection_response(g_f: np.ndarray, zf: np.ndarray, grid_size: tuple[int, int]) -> np.ndarray:
     """Response map R = F^-1 sum_k conj(g_k) z_k (eq. 16), real, peak at the origin if no motion."""
-    response_f = np.empty(zf.shape[1:], np.complex64)
-    admm_kernels.conj_product_sum(g_f, zf, response_f)
+    response_f = np.einsum("krc,krc->rc", np.conj(g_f), zf)
     return from_spectrum(response_f, grid_size)
 
 
