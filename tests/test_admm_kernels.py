@@ -142,3 +142,60 @@ def test_g_step_zero_start_equals_the_full_sums_bit_for_bit(monkeypatch, dataset
             full = dcf.solve_g_step(*args, zero_start=False)
             skipped = dcf.solve_g_step(*args, zero_start=True)
             np.testing.assert_array_equal(skipped.view(np.uint64), full.view(np.uint64))
+
+
+def _newton_peak_in_numpy(response, iterations):
+    """The Newton peak as it was written before its kernel (the release's matrix products)."""
+    rows, cols = response.shape
+    response_f = np.fft.fft2(response).astype(np.complex64)
+    peak_row, peak_col = divmod(int(np.argmax(response)), cols)
+    init_score = float(response[peak_row, peak_col])
+    trans_row = (peak_row + (rows - 1) // 2) % rows - (rows - 1) // 2
+    trans_col = (peak_col + (cols - 1) // 2) % cols - (cols - 1) // 2
+    pos_y, pos_x = 2.0 * np.pi * trans_row / rows, 2.0 * np.pi * trans_col / cols
+    init_y, init_x = pos_y, pos_x
+    ky, kx = dcf.centred_frequencies(rows), dcf.centred_frequencies(cols)
+    exp_iky, exp_ikx = np.exp(1j * ky * pos_y), np.exp(1j * kx * pos_x)
+    for _ in range(iterations):
+        y_resp, resp_x = exp_iky @ response_f, response_f @ exp_ikx
+        grad_y = -(ky * exp_iky @ resp_x).imag
+        grad_x = -(y_resp @ (kx * exp_ikx)).imag
+        ival = 1j * (exp_iky @ resp_x)
+        h_yy = (-(ky**2 * exp_iky) @ resp_x + ival).real
+        h_xx = (-y_resp @ (kx**2 * exp_ikx) + ival).real
+        h_xy = (-(ky * exp_iky @ (response_f @ (kx * exp_ikx)))).real
+        det = h_yy * h_xx - h_xy * h_xy
+        pos_y = pos_y - (h_xx * grad_y - h_xy * grad_x) / det
+        pos_x = pos_x - (h_yy * grad_x - h_xy * grad_y) / det
+        exp_iky, exp_ikx = np.exp(1j * ky * pos_y), np.exp(1j * kx * pos_x)
+    score = float(np.real(exp_iky @ response_f @ exp_ikx)) / (rows * cols)
+    if score < init_score:
+        pos_y, pos_x, score = init_y, init_x, init_score
+    wrap = 2.0 * np.pi
+    return (
+        (np.mod(pos_y + np.pi, wrap) - np.pi) / wrap * rows,
+        (np.mod(pos_x + np.pi, wrap) - np.pi) / wrap * cols,
+        score,
+    )
+
+
+@needs_colour_table
+@pytest.mark.parametrize(("dataset", "name"), SEQUENCES)
+def test_newton_kernel_equals_the_numpy_newton_peak(monkeypatch, dataset, name):
+    """The compiled Newton iterations give the matrix-product version's peak on real responses
+    (to float rounding: the sums are taken in another order)."""
+    responses = []
+    original = dcf.detection_response
+
+    def recording(*args):
+        responses.append(original(*args))
+        return responses[-1]
+
+    monkeypatch.setattr(dcf, "detection_response", recording)
+    _training_inputs(monkeypatch, dataset, name, frames=12)
+    assert len(responses) >= 10
+    for response in responses:
+        got = dcf.newton_peak(response, 5)
+        expected = _newton_peak_in_numpy(response, 5)
+        np.testing.assert_allclose(got[:2], expected[:2], rtol=0, atol=1e-6)
+        assert got[2] == pytest.approx(expected[2], rel=1e-6)

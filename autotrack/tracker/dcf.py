@@ -11,7 +11,7 @@ FFT runs over contiguous memory.
 
 from __future__ import annotations
 
-import sys
+import math
 from dataclasses import dataclass
 from functools import lru_cache
 
@@ -19,28 +19,10 @@ import numpy as np
 import scipy.fft
 from numba import njit
 
-from autotrack.tracker import admm_kernels
+from autotrack.tracker import admm_kernels, fft_plans
+from autotrack.tracker.fft_plans import pyfftw
 
 _FFT_AXES = (-2, -1)
-
-
-def _import_pyfftw():
-    """pyFFTW without its dask interface: when dask is installed, `import pyfftw` imports
-    dask.array (~0.4 s of a fresh process's start-up) for `pyfftw.interfaces.dask_fft`, which
-    the tracker never uses. A None entry in sys.modules makes that optional import fail fast."""
-    blocked = "dask.array.fft" not in sys.modules
-    if blocked:
-        sys.modules["dask.array.fft"] = None
-    try:
-        import pyfftw
-        import pyfftw.builders
-    finally:
-        if blocked:
-            del sys.modules["dask.array.fft"]
-    return pyfftw
-
-
-pyfftw = _import_pyfftw()
 
 
 def matlab_round(values: np.ndarray | float) -> np.ndarray:
@@ -99,38 +81,23 @@ class SpectrumTransform:
     """Planned FFTW real transforms of (channels, rows, cols) float32 maps, one thread.
 
     The hot path of a tracker runs 2 * admm_iterations - 1 multi-channel transforms per frame
-    of a fixed shape; FFTW plans made once per tracker are about twice as fast as pocketfft.
-    Plans are estimated, not measured: measured plans (FFTW_MEASURE/PATIENT, 1.3-1.8x faster
-    on 50 x 50 grids) depend on the timings of the moment, and a different plan rounds
-    differently, which this chaotic tracker turns into different boxes from run to run.
+    of a fixed shape. The plans are measured once per machine and shape and kept as FFTW wisdom
+    on disk (`fft_plans`), so every tracker, thread and child process of this machine uses the
+    same plans (the same rounding); estimated plans when that file cannot be used.
     """
 
     def __init__(self, channels: int, grid_size: tuple[int, int]) -> None:
         self.grid_size = grid_size
         rows, cols = grid_size
-        self._forward = pyfftw.builders.rfft2(
-            np.empty((channels, rows, cols), np.float32),
-            axes=_FFT_AXES,
-            threads=1,
-            planner_effort="FFTW_ESTIMATE",
-        )
-        self._inverse = pyfftw.builders.irfft2(
-            np.empty((channels, rows, cols // 2 + 1), np.complex64),
-            s=grid_size,
-            axes=_FFT_AXES,
-            threads=1,
-            planner_effort="FFTW_ESTIMATE",
-        )
+        plans = fft_plans.plans_for(channels, grid_size)
+        self.effort = plans.effort
+        self._forward = plans.forward
+        self._inverse = plans.inverse
         self._spectrum_shape = (channels, rows, cols // 2 + 1)
-        # The h-step's own forward plan on its own buffers (the same estimated plan as
-        # `_forward`, so the same rounding): its input is written in place by a kernel, and
-        # `forward` re-targeting `_forward`'s output array cannot touch a live h spectrum.
-        self._h_forward = pyfftw.builders.rfft2(
-            np.empty((channels, rows, cols), np.float32),
-            axes=_FFT_AXES,
-            threads=1,
-            planner_effort="FFTW_ESTIMATE",
-        )
+        # The h-step's own forward plan on its own buffers (the same plan as `_forward`, so the
+        # same rounding): its input is written in place by a kernel, and `forward` re-targeting
+        # `_forward`'s output array cannot touch a live h spectrum.
+        self._h_forward = plans.h_forward
 
     def forward(self, maps: np.ndarray) -> np.ndarray:
         """Half spectra of real maps (a new complex64 array)."""
@@ -356,6 +323,55 @@ def detection_response(g_f: np.ndarray, zf: np.ndarray, grid_size: tuple[int, in
     return from_spectrum(response_f, grid_size)
 
 
+@njit(cache=True, nogil=True, fastmath=False)
+def _newton_kernel(response_f, ky, kx, ky_sq, kx_sq, pos_y, pos_x, iterations):
+    """Newton's iterations on the Fourier series of a response (the release's, in loops): the
+    peak position (radians per axis) and the interpolated score times rows * cols."""
+    rows, cols = response_f.shape
+    exp_iky = np.exp(1j * ky * pos_y)
+    exp_ikx = np.exp(1j * kx * pos_x)
+    for _ in range(iterations):
+        y_resp = np.zeros(cols, np.complex128)  # exp_iky @ F
+        resp_x = np.zeros(rows, np.complex128)  # F @ exp_ikx
+        resp_kx = np.zeros(rows, np.complex128)  # F @ (kx exp_ikx)
+        for r in range(rows):
+            for c in range(cols):
+                value = response_f[r, c]
+                y_resp[c] += exp_iky[r] * value
+                resp_x[r] += value * exp_ikx[c]
+                resp_kx[r] += value * (kx[c] * exp_ikx[c])
+        grad_y_sum = ival_sum = h_yy_sum = h_xy_sum = 0j
+        for r in range(rows):
+            ky_exp = ky[r] * exp_iky[r]
+            grad_y_sum += ky_exp * resp_x[r]
+            ival_sum += exp_iky[r] * resp_x[r]
+            h_yy_sum += (ky_sq[r] * exp_iky[r]) * resp_x[r]
+            h_xy_sum += ky_exp * resp_kx[r]
+        grad_x_sum = h_xx_sum = 0j
+        for c in range(cols):
+            grad_x_sum += y_resp[c] * (kx[c] * exp_ikx[c])
+            h_xx_sum += y_resp[c] * (kx_sq[c] * exp_ikx[c])
+        grad_y, grad_x = -grad_y_sum.imag, -grad_x_sum.imag
+        ival = 1j * ival_sum
+        h_yy = (-h_yy_sum + ival).real
+        h_xx = (-h_xx_sum + ival).real
+        h_xy = -h_xy_sum.real
+        det = h_yy * h_xx - h_xy * h_xy
+        if det == 0.0 or not np.isfinite(det):
+            break
+        pos_y = pos_y - (h_xx * grad_y - h_xy * grad_x) / det
+        pos_x = pos_x - (h_yy * grad_x - h_xy * grad_y) / det
+        exp_iky = np.exp(1j * ky * pos_y)
+        exp_ikx = np.exp(1j * kx * pos_x)
+    score = 0j
+    for r in range(rows):
+        row_sum = 0j
+        for c in range(cols):
+            row_sum += response_f[r, c] * exp_ikx[c]
+        score += exp_iky[r] * row_sum
+    return pos_y, pos_x, score.real
+
+
 def newton_peak(response: np.ndarray, iterations: int) -> tuple[float, float, float]:
     """Sub-pixel peak of a response map by Newton's method on its Fourier series.
 
@@ -364,7 +380,7 @@ def newton_peak(response: np.ndarray, iterations: int) -> tuple[float, float, fl
     [-n/2, n/2).
     """
     rows, cols = response.shape
-    response_f = scipy.fft.fft2(response, workers=1)
+    response_f = scipy.fft.fft2(response, workers=1).astype(np.complex128)
     peak_index = int(np.argmax(response))
     peak_row, peak_col = divmod(peak_index, cols)
     init_score = float(response[peak_row, peak_col])
@@ -372,38 +388,25 @@ def newton_peak(response: np.ndarray, iterations: int) -> tuple[float, float, fl
     col_half = (cols - 1) // 2
     trans_row = (peak_row + row_half) % rows - row_half
     trans_col = (peak_col + col_half) % cols - col_half
-    init_y = 2.0 * np.pi * trans_row / rows
-    init_x = 2.0 * np.pi * trans_col / cols
-    ky = centred_frequencies(rows)
-    kx = centred_frequencies(cols)
-    ky_sq, kx_sq = _squared_frequencies(rows), _squared_frequencies(cols)
-    pos_y, pos_x = init_y, init_x
-    exp_iky = np.exp(1j * ky * pos_y)
-    exp_ikx = np.exp(1j * kx * pos_x)
-    for _ in range(iterations):
-        y_resp = exp_iky @ response_f
-        resp_x = response_f @ exp_ikx
-        ky_exp = ky * exp_iky  # each product once (the release writes it twice: same values)
-        kx_exp = kx * exp_ikx
-        grad_y = -(ky_exp @ resp_x).imag
-        grad_x = -(y_resp @ kx_exp).imag
-        ival = 1j * (exp_iky @ resp_x)
-        h_yy = (-(ky_sq * exp_iky) @ resp_x + ival).real
-        h_xx = (-y_resp @ (kx_sq * exp_ikx) + ival).real
-        h_xy = (-(ky_exp @ (response_f @ kx_exp))).real
-        det = h_yy * h_xx - h_xy * h_xy
-        if det == 0.0 or not np.isfinite(det):
-            break
-        pos_y = pos_y - (h_xx * grad_y - h_xy * grad_x) / det
-        pos_x = pos_x - (h_yy * grad_x - h_xy * grad_y) / det
-        exp_iky = np.exp(1j * ky * pos_y)
-        exp_ikx = np.exp(1j * kx * pos_x)
-    score = float(np.real(exp_iky @ response_f @ exp_ikx)) / (rows * cols)
-    if not np.isfinite(score) or score < init_score:
+    init_y = 2.0 * math.pi * trans_row / rows
+    init_x = 2.0 * math.pi * trans_col / cols
+    pos_y, pos_x, score = _newton_kernel(
+        response_f,
+        centred_frequencies(rows),
+        centred_frequencies(cols),
+        _squared_frequencies(rows),
+        _squared_frequencies(cols),
+        init_y,
+        init_x,
+        int(iterations),
+    )
+    score /= rows * cols
+    if not math.isfinite(score) or score < init_score:
         pos_y, pos_x, score = init_y, init_x, init_score
-    disp_row = (np.mod(pos_y + np.pi, 2.0 * np.pi) - np.pi) / (2.0 * np.pi) * rows
-    disp_col = (np.mod(pos_x + np.pi, 2.0 * np.pi) - np.pi) / (2.0 * np.pi) * cols
-    return float(disp_row), float(disp_col), score
+    turn = 2.0 * math.pi
+    disp_row = ((pos_y + math.pi) % turn - math.pi) / turn * rows  # np.mod's value for floats
+    disp_col = ((pos_x + math.pi) % turn - math.pi) / turn * cols
+    return float(disp_row), float(disp_col), float(score)
 
 
 def shift_spectrum(

@@ -6,6 +6,7 @@ import math
 
 import numpy as np
 import scipy.fft
+from numba import njit
 
 from autotrack.params import TrackerParams
 from autotrack.tracker.features import scale_features
@@ -18,6 +19,47 @@ def symmetric_hann(n: int) -> np.ndarray:
         return np.ones(1)
     k = np.arange(n)
     return 0.5 * (1.0 - np.cos(2.0 * np.pi * k / (n - 1)))
+
+
+@njit(cache=True, nogil=True, fastmath=False)
+def _learn(numerator, denominator, label_f, samples_f, rate, first):
+    """The model's running average in one pass: numerator <- (1 - rate) numerator + rate
+    label conj(S), denominator <- (1 - rate) denominator + rate sum_d |S_d|^2 (or the new
+    terms alone on the first frame), per scale."""
+    scales, dims = samples_f.shape
+    keep = np.float32(1.0 - rate)
+    rate = np.float32(rate)
+    for i in range(scales):
+        y = label_f[i]
+        energy = np.float32(0.0)
+        for j in range(dims):
+            sample = samples_f[i, j]
+            new_re = y.real * sample.real + y.imag * sample.imag  # label conj(S)
+            new_im = y.imag * sample.real - y.real * sample.imag
+            energy += sample.real * sample.real + sample.imag * sample.imag
+            if first:
+                numerator[i, j] = complex(new_re, new_im)
+            else:
+                old = numerator[i, j]
+                numerator[i, j] = complex(
+                    keep * old.real + rate * new_re, keep * old.imag + rate * new_im
+                )
+        denominator[i] = energy if first else keep * denominator[i] + rate * energy
+
+
+@njit(cache=True, nogil=True, fastmath=False)
+def _response_spectrum(numerator, denominator, samples_f, regulariser, out):
+    """out = sum_d numerator_d S_d / (denominator + lambda), per scale."""
+    scales, dims = samples_f.shape
+    for i in range(scales):
+        acc_re = np.float32(0.0)
+        acc_im = np.float32(0.0)
+        for j in range(dims):
+            a, b = numerator[i, j], samples_f[i, j]
+            acc_re += a.real * b.real - a.imag * b.imag
+            acc_im += a.real * b.imag + a.imag * b.real
+        scale = np.float32(1.0) / (denominator[i] + np.float32(regulariser))
+        out[i] = complex(acc_re * scale, acc_im * scale)
 
 
 class ScaleFilter:
@@ -82,12 +124,11 @@ class ScaleFilter:
         self._samples = self._extract(image, position, scale, all_indices)
         samples_f = scipy.fft.fft(self._samples, axis=0, workers=1)
         self._samples_f = samples_f
-        response = np.real(
-            scipy.fft.ifft(
-                np.sum(self._numerator * samples_f, axis=1)
-                / (self._denominator + self.params.scale_lambda)
-            )
+        response_f = np.empty(samples_f.shape[0], np.complex64)
+        _response_spectrum(
+            self._numerator, self._denominator, samples_f, self.params.scale_lambda, response_f
         )
+        response = np.real(scipy.fft.ifft(response_f, workers=1))
         best = int(np.argmax(response))
         new_scale = scale * float(self.scale_steps[best])
         return best, float(np.clip(new_scale, self.min_scale, self.max_scale))
@@ -120,11 +161,9 @@ class ScaleFilter:
             samples_f = self._samples_f  # scale unchanged: the detection samples, transformed
         else:
             samples_f = scipy.fft.fft(samples, axis=0, workers=1)
-        numerator = self.label_f[:, None] * np.conj(samples_f)
-        denominator = np.sum(np.real(samples_f * np.conj(samples_f)), axis=1)
+        first = self._numerator is None
+        if first:
+            self._numerator = np.empty(samples_f.shape, np.complex64)
+            self._denominator = np.empty(samples_f.shape[0], np.float32)
         rate = self.params.scale_learning_rate
-        if self._numerator is None:
-            self._numerator, self._denominator = numerator, denominator
-        else:
-            self._numerator = (1 - rate) * self._numerator + rate * numerator
-            self._denominator = (1 - rate) * self._denominator + rate * denominator
+        _learn(self._numerator, self._denominator, self.label_f, samples_f, rate, first)

@@ -1,0 +1,280 @@
+"""FFTW plans measured once per machine and kept on disk, so that every process uses the same.
+
+A measured plan (FFTW_MEASURE) runs the tracker's (channels, rows, cols) transforms 1.1-2.3x
+faster than an estimated one, but FFTW chooses it by timing candidates, and another plan rounds
+differently: the tracker being chaotic, two processes measuring on their own would track
+differently. So each shape is measured once, by the first process that needs it, and kept as
+FFTW wisdom in a file that every later process, and every child of `target_process`, imports
+before planning:
+
+- the file is `$AUTOTRACK_FFTW_WISDOM` when set, else
+  `cache_root() / "fftw" / "wisdom-<machine>-<cpu model hash>-<pyfftw version>.json`;
+- a shape this process has not planned yet is planned under an exclusive `fcntl` lock on
+  `<file>.lock`: the file is imported, the plan made from wisdom alone (FFTW_WISDOM_ONLY), and
+  only when the shape is missing it is measured and the merged wisdom written back atomically.
+  Two processes planning one shape at once therefore end with one plan;
+- a file that cannot be locked, read, parsed or written gives estimated plans (FFTW_ESTIMATE)
+  for the rest of the process, never an error: a process never mixes wisdom imported later with
+  plans estimated earlier, so its own trackers stay alike.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import logging
+import os
+import platform
+import sys
+import threading
+import time
+from contextlib import contextmanager
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import scipy.fft
+
+from autotrack.compile_cache import cache_root
+from autotrack.io.atomic import write_text
+
+try:
+    import fcntl
+except ImportError:  # not POSIX: no lock, so no shared measured plans
+    fcntl = None
+
+
+def _import_pyfftw():
+    """pyFFTW without its dask interface: when dask is installed, `import pyfftw` imports
+    dask.array (~0.4 s of a fresh process's start-up) for `pyfftw.interfaces.dask_fft`, which
+    the tracker never uses. A None entry in sys.modules makes that optional import fail fast."""
+    blocked = "dask.array.fft" not in sys.modules
+    if blocked:
+        sys.modules["dask.array.fft"] = None
+    try:
+        import pyfftw
+    finally:
+        if blocked:
+            del sys.modules["dask.array.fft"]
+    return pyfftw
+
+
+pyfftw = _import_pyfftw()
+
+WISDOM_ENV = "AUTOTRACK_FFTW_WISDOM"
+"""Environment variable naming the wisdom file (the tests point it at a temporary folder)."""
+
+WISDOM_FORMAT = 1
+_AXES = (-2, -1)
+_log = logging.getLogger(__name__)
+
+
+@dataclass(frozen=True)
+class PlanSet:
+    """The three plans of one (channels, rows, cols) grid; each owns its input/output arrays."""
+
+    forward: object
+    """r2c of (channels, rows, cols) float32 -> (channels, rows, cols // 2 + 1) complex64."""
+    inverse: object
+    """c2r back (destroys its input; calling it scales by 1 / (rows cols))."""
+    h_forward: object
+    """A second r2c plan on its own arrays (the same plan as `forward`)."""
+    effort: str
+    """"FFTW_MEASURE" (from the wisdom file), "FFTW_ESTIMATE" (the fallback) or "pocketfft"."""
+
+
+class _Planner:
+    """This process's view of the wisdom file: which shapes it planned and how."""
+
+    def __init__(self) -> None:
+        self.lock = threading.Lock()
+        self.efforts: dict[tuple[int, int, int], str] = {}
+        self.disabled = False
+        self.last_measure_seconds = 0.0
+        self.good_wisdom: tuple[bytes, ...] | None = None
+        """The wisdom of the file as last imported or saved, all this process plans from."""
+
+
+_planner = _Planner()
+
+
+def wisdom_path() -> Path:
+    """The wisdom file this process reads and writes."""
+    configured = os.environ.get(WISDOM_ENV)
+    if configured:
+        return Path(configured).expanduser()
+    return cache_root() / "fftw" / f"wisdom-{_machine_key()}-{pyfftw.__version__}.json"
+
+
+def _machine_key() -> str:
+    """The CPU kind: FFTW wisdom names SIMD codelets, and a plan is only valid on like CPUs."""
+    found = {"model name": "", "flags": ""}  # the first CPU's: not the CPU count
+    try:
+        with open("/proc/cpuinfo", encoding="utf-8", errors="replace") as handle:
+            for line in handle:
+                key = line.split(":", 1)[0].strip()
+                if key in found and not found[key]:
+                    found[key] = line
+                if all(found.values()):
+                    break
+    except OSError:
+        pass
+    model = (platform.processor() or "") + found["model name"] + found["flags"]
+    digest = hashlib.sha256(model.encode()).hexdigest()[:12]
+    return f"{platform.machine() or 'cpu'}-{digest}"
+
+
+def _make_plans(shape: tuple[int, int, int], flags: tuple[str, ...]) -> tuple:
+    channels, rows, cols = shape
+    spectrum_shape = (channels, rows, cols // 2 + 1)
+
+    def r2c():
+        real = pyfftw.empty_aligned(shape, np.float32)
+        spectrum = pyfftw.empty_aligned(spectrum_shape, np.complex64)
+        return pyfftw.FFTW(real, spectrum, axes=_AXES, direction="FFTW_FORWARD", flags=flags)
+
+    inverse = pyfftw.FFTW(
+        pyfftw.empty_aligned(spectrum_shape, np.complex64),
+        pyfftw.empty_aligned(shape, np.float32),
+        axes=_AXES,
+        direction="FFTW_BACKWARD",
+        flags=(*flags, "FFTW_DESTROY_INPUT"),
+    )
+    return r2c(), inverse, r2c()
+
+
+@contextmanager
+def _locked(path: Path):
+    """An exclusive lock on `path`.lock for the block (raises OSError when impossible)."""
+    if fcntl is None:
+        raise OSError("no fcntl on this platform")
+    path.parent.mkdir(parents=True, exist_ok=True)
+    descriptor = os.open(f"{path}.lock", os.O_RDWR | os.O_CREAT, 0o644)
+    try:
+        fcntl.flock(descriptor, fcntl.LOCK_EX)
+        yield
+    finally:
+        os.close(descriptor)  # closing releases the lock
+
+
+def _import_file(path: Path) -> None:
+    """Import the wisdom in `path` (none yet is fine); ValueError when it is not valid."""
+    try:
+        text = path.read_text(encoding="ascii")
+    except FileNotFoundError:
+        return
+    try:
+        content = json.loads(text)
+        wisdom = tuple(part.encode("ascii") for part in content["wisdom"])
+    except (ValueError, KeyError, TypeError, AttributeError, UnicodeError) as error:
+        raise ValueError(f"unreadable FFTW wisdom in {path}: {error}") from error
+    if content.get("format") != WISDOM_FORMAT or len(wisdom) != 3:
+        raise ValueError(f"unknown FFTW wisdom format in {path}")
+    if not all(pyfftw.import_wisdom(wisdom)):
+        raise ValueError(f"FFTW rejected the wisdom in {path} (another FFTW or CPU)")
+
+
+def _save_file(path: Path) -> None:
+    wisdom = [part.decode("ascii") for part in pyfftw.export_wisdom()]
+    write_text(path, json.dumps({"format": WISDOM_FORMAT, "wisdom": wisdom}))
+
+
+def _plan_from_file(shape: tuple[int, int, int], path: Path) -> tuple:
+    """Plans from the file's wisdom, measuring (and saving) the shape if it is missing."""
+    with _locked(path):
+        _import_file(path)
+        try:
+            return _make_plans(shape, ("FFTW_MEASURE", "FFTW_WISDOM_ONLY"))
+        except RuntimeError:
+            pass  # not planned on this machine yet
+        start = time.perf_counter()
+        plans = _make_plans(shape, ("FFTW_MEASURE",))
+        _planner.last_measure_seconds = time.perf_counter() - start
+        _save_file(path)
+        return plans
+
+
+def largest_prime_factor(n: int) -> int:
+    """The largest prime dividing n (n itself for a prime, 1 for n < 2)."""
+    largest, factor = 1, 2
+    while factor * factor <= n:
+        while n % factor == 0:
+            largest, n = factor, n // factor
+        factor += 1
+    return max(largest, n) if n > 1 else largest
+
+
+def prefers_pocketfft(side: int) -> bool:
+    """Whether a grid side transforms faster with pocketfft than with a measured FFTW plan.
+
+    FFTW is fastest on even sides made of small primes; on odd sides and sides with a large
+    prime factor its plans (Rader, generic codelets) are 1.1-1.6x slower than pocketfft's
+    (the table in docs/benchmarks.md, 42 channels, sides 38-50). A rule on the side, not a
+    timing, so the choice is the same in every process and on every machine.
+    """
+    return side % 2 == 1 or largest_prime_factor(side) > 11
+
+
+class PocketPlan:
+    """scipy.fft's pocketfft behind the part of a pyFFTW plan the tracker uses: an input array
+    of its own, and a call that transforms it (or the array given) into a new array (an output
+    array, if given, is not used)."""
+
+    def __init__(self, input_array: np.ndarray, inverse_size: tuple[int, int] | None = None):
+        self.input_array = input_array
+        self._inverse_size = inverse_size
+
+    def __call__(self, input_array: np.ndarray | None = None, output_array=None) -> np.ndarray:
+        source = self.input_array if input_array is None else input_array
+        if self._inverse_size is None:
+            return scipy.fft.rfft2(source, axes=_AXES, workers=1)
+        return scipy.fft.irfft2(source, s=self._inverse_size, axes=_AXES, workers=1)
+
+
+def _pocket_plans(shape: tuple[int, int, int]) -> PlanSet:
+    channels, rows, cols = shape
+    spectrum = np.empty((channels, rows, cols // 2 + 1), np.complex64)
+    return PlanSet(
+        PocketPlan(np.empty(shape, np.float32)),
+        PocketPlan(spectrum, (rows, cols)),
+        PocketPlan(np.empty(shape, np.float32)),
+        effort="pocketfft",
+    )
+
+
+def plans_for(channels: int, grid_size: tuple[int, int]) -> PlanSet:
+    """Forward, inverse and second forward plans of (channels, *grid_size), one thread each:
+    pocketfft where `prefers_pocketfft`, FFTW plans (measured, or estimated) elsewhere."""
+    shape = (int(channels), int(grid_size[0]), int(grid_size[1]))
+    if prefers_pocketfft(shape[1]) or prefers_pocketfft(shape[2]):
+        return _pocket_plans(shape)
+    with _planner.lock:
+        effort = _planner.efforts.get(shape)
+        if effort == "FFTW_MEASURE":
+            plans = _make_plans(shape, ("FFTW_MEASURE", "FFTW_WISDOM_ONLY"))
+        elif effort is None and not _planner.disabled:
+            path = wisdom_path()
+            try:
+                plans, effort = _plan_from_file(shape, path), "FFTW_MEASURE"
+                _planner.good_wisdom = pyfftw.export_wisdom()
+            except (OSError, ValueError) as error:
+                _log.warning("FFTW plans estimated, not measured (%s)", error)
+                _fall_back()
+        if _planner.disabled and effort != "FFTW_MEASURE":
+            plans, effort = _make_plans(shape, ("FFTW_ESTIMATE",)), "FFTW_ESTIMATE"
+        _planner.efforts[shape] = effort
+    return PlanSet(*plans, effort=effort)
+
+
+def _fall_back() -> None:
+    """Estimated plans from now on, and in-memory wisdom back to what the file held when it
+    last worked: a shape measured but not saved must not leak into the estimated plans."""
+    _planner.disabled = True
+    pyfftw.forget_wisdom()
+    if _planner.good_wisdom is not None:
+        pyfftw.import_wisdom(_planner.good_wisdom)
+
+
+def last_measure_seconds() -> float:
+    """Wall-clock seconds the last shape measured by this process took to plan (0 if none)."""
+    return _planner.last_measure_seconds
