@@ -151,7 +151,7 @@ class TrackerParams:
     turned angle is taken when its peak is higher by `rotation_margin` and its response as sharp
     (rotation.turn_wins); 0 = the release's axis-aligned patches. 10: half an
     fHOG orientation bin (20 degrees), the smallest turn that moves a gradient's energy into the
-    neighbouring bin. Measured, not in `autotrack+` (docs/tracker.md)."""
+    neighbouring bin. In `autotrack+` since round 6 (docs/tracker.md)."""
     rotation_margin: float = 0.05
     """A turned sample is taken only when its peak exceeds the current angle's by this fraction
     (a prior that the target keeps its angle). 0.05: twice the median frame-to-frame change of
@@ -252,6 +252,7 @@ PRESETS: dict[str, TrackerParams] = {
         redetect_span=3.0,
         scale_model_min_side=16.0,
         memory_rate=0.01,
+        rotation_step=10.0,
     ),
 }
 """The paper's ablation (Table 2): STRCF baseline, +ASR, +ATR, the full AutoTrack (the authors'

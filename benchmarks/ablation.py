@@ -51,6 +51,7 @@ ABLATION: dict[str, dict] = {
     "+ aspect filter": {"num_aspects": 17},
     "+ velocity prediction": {"velocity_weight": 1.0},
     "+ long-term memory": {"memory_rate": PRESETS[PLUS].memory_rate},
+    "+ in-plane rotation": {"rotation_step": PRESETS[PLUS].rotation_step},
 }
 """Each change of `autotrack+` on its own on top of the faithful preset (the acting ASR needs the
 bounded variation, re-detection needs the gate), as Table 2 adds ASR and ATR to STRCF."""
@@ -64,6 +65,8 @@ SENSITIVE = (
     "scale_model_min_side",
     "memory_rate",
     "distractor_ratio",
+    "rotation_step",
+    "rotation_margin",
 )
 """The parameters `autotrack+` uses or adds (delta is the release's, but it acts only here)."""
 
@@ -72,7 +75,6 @@ CANDIDATES: dict[str, dict] = {
     f"{PLUS} + velocity prediction": ABLATION["+ velocity prediction"],
     f"{PLUS} + motion prior": {"motion_prior": 0.5},
     f"{PLUS} + relative ASR": {"asr_relative": True},
-    f"{PLUS} + rotation": {"rotation_step": 10.0, "rotation_margin": 0.05},
 }
 """Switches measured on top of `autotrack+` but left out of the preset (docs/benchmarks.md);
 their parameters' sensitivity is taken around these variants."""
@@ -91,12 +93,15 @@ def plus_overrides() -> dict:
 WITHOUT_ASR = f"{PLUS} without acting ASR"
 """Leave-one-out of the change whose effect on the mean is smallest and least certain."""
 WITHOUT_MEMORY = f"{PLUS} without long-term memory"
-"""Leave-one-out of the newest change: `autotrack+` as it was before the memory was adopted."""
+"""Leave-one-out of the long-term memory (adopted in round 4)."""
 WITHOUT_VARIATION = f"{PLUS} without robust variation and acting ASR"
 """Leave-one-out of the two changes to the release's regularisation (the acting ASR needs the
 bounded variation): the gate, re-detection and the scale model on the release's ASR and ATR."""
 
-LEAVE_OUTS = (WITHOUT_ASR, WITHOUT_MEMORY, WITHOUT_VARIATION)
+WITHOUT_ROTATION = f"{PLUS} without rotation"
+"""Leave-one-out of the newest change: `autotrack+` as it was before rotation was adopted."""
+
+LEAVE_OUTS = (WITHOUT_ASR, WITHOUT_MEMORY, WITHOUT_VARIATION, WITHOUT_ROTATION)
 
 
 def variants(sensitivity: bool) -> dict[str, dict]:
@@ -106,6 +111,7 @@ def variants(sensitivity: bool) -> dict[str, dict]:
     table[WITHOUT_ASR] = {**plus_overrides(), "acting_asr": False}
     table[WITHOUT_MEMORY] = {**plus_overrides(), "memory_rate": 0.0}
     table[WITHOUT_VARIATION] = {**plus_overrides(), "acting_asr": False, "robust_variation": False}
+    table[WITHOUT_ROTATION] = {**plus_overrides(), "rotation_step": 0.0}
     for label, extra in CANDIDATES.items():
         table[label] = {**plus_overrides(), **extra}
     if sensitivity:
@@ -272,8 +278,9 @@ def build_tables(sequences, results: dict, table: dict[str, dict]) -> str:
             [*ABLATION, PLUS, *LEAVE_OUTS, *CANDIDATES],
             [
                 *("faithful", "+RV", "+RV+ASR", "+gate", "+gate+redet", "+scale", "+aspect"),
-                *("+velocity", "+memory", PLUS, "+ no ASR", "+ no memory", "+ no RV/ASR"),
-                *("+ + aspect", "+ + velocity", "+ + motion prior", "+ + rel. ASR", "+ + rotation"),
+                *("+velocity", "+memory", "+rotation", PLUS, "+ no ASR", "+ no memory"),
+                *("+ no RV/ASR", "+ no rotation", "+ + aspect", "+ + velocity"),
+                *("+ + motion prior", "+ + rel. ASR"),
             ],
             strict=True,
         )
