@@ -39,6 +39,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 if TYPE_CHECKING:
+    from autotrack.params import TrackerParams
     from autotrack.tracker.target_process import WorkerPool
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -74,9 +75,17 @@ def guarded_sequences(max_frames: int | None):
     return sequences
 
 
-def single_target(trackers: list[str], repeats: int, max_frames: int | None) -> dict:
-    """{tracker: {sequence: [fps per repeat]}} and AutoTrack's boxes of the first repeat."""
+def single_target(
+    trackers: list[str],
+    repeats: int,
+    max_frames: int | None,
+    variant: TrackerParams | None = None,
+) -> dict:
+    """{tracker: {sequence: [fps per repeat]}} and AutoTrack's boxes of the first repeat;
+    `variant` is what the tracker named VARIANT runs (`--plus`)."""
     from autotrack.evaluation.benchmark import run_task
+    from autotrack.evaluation.peers import AutoTrackPeer
+    from autotrack.evaluation.runs import track_timed
 
     fps: dict[str, dict[str, list[float]]] = {t: {} for t in trackers}
     boxes = {}
@@ -84,8 +93,11 @@ def single_target(trackers: list[str], repeats: int, max_frames: int | None) -> 
         for repeat in range(repeats):
             order = trackers[repeat % len(trackers) :] + trackers[: repeat % len(trackers)]
             for tracker in order:
-                table = str(COLOUR_TABLE) if tracker in ("autotrack", "strcf") else None
-                result = run_task(tracker, sequence, table)
+                if tracker == VARIANT:
+                    result = track_timed(tracker, lambda: AutoTrackPeer(variant), sequence)
+                else:
+                    table = str(COLOUR_TABLE) if tracker in ("autotrack", "strcf") else None
+                    result = run_task(tracker, sequence, table)
                 fps[tracker].setdefault(sequence.name, []).append(result.fps)
                 if tracker == "autotrack" and repeat == 0:
                     boxes[sequence.name] = result.boxes
@@ -321,21 +333,20 @@ def guard(boxes_by_sequence: dict[str, np.ndarray]) -> bool:
     return ok and bool(np.all(drift <= 0.01))
 
 
-def register_variant(overrides: str) -> bool:
-    """Add VARIANT, `autotrack+` with `overrides` (NAME=VALUE,...), to the presets for this run;
-    False (and one line on stderr) for an unknown parameter."""
+def variant_params(overrides: str) -> TrackerParams | None:
+    """`autotrack+` with `overrides` (NAME=VALUE,...), what VARIANT runs; None (and one line on
+    stderr) for an unknown parameter."""
     from dataclasses import replace
 
     from ab_tracker import parse_overrides  # benchmarks/ is the script's folder
 
-    from autotrack.params import PRESETS
+    from autotrack.params import preset
 
     try:
-        PRESETS[VARIANT] = replace(PRESETS["autotrack+"], **parse_overrides(overrides))
+        return replace(preset("autotrack+"), **parse_overrides(overrides))
     except ValueError as error:
         print(f"--plus: {error}", file=sys.stderr)
-        return False
-    return True
+        return None
 
 
 def main() -> int:
@@ -371,12 +382,13 @@ def main() -> int:
 
         cv2.setNumThreads(1)
         trackers = [t.strip() for t in args.trackers.split(",") if t.strip()]
+        variant = variant_params(args.plus) if args.plus else None
         if args.plus:
-            if not register_variant(args.plus):
+            if variant is None:
                 return 2
             trackers.append(VARIANT)
         print(f"\nsingle target, {args.repeats} interleaved repeats per sequence:")
-        result = single_target(trackers, args.repeats, args.max_frames)
+        result = single_target(trackers, args.repeats, args.max_frames, variant)
         print_single_target(result)
 
     if not args.skip_multi:
