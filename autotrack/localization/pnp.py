@@ -86,48 +86,26 @@ def weighted_refinement(
     image_points: np.ndarray,
     start: np.ndarray,
     weights: np.ndarray,
-    max_iterations: int = 100,
 ) -> np.ndarray:
-    """(rvec | tvec) minimising sum_i w_i |project(X_i) - x_i|^2 from `start`: Levenberg-Marquardt
-    with Marquardt's diagonal damping on OpenCV's analytic Jacobian (what solvePnPRefineLM does
-    for equal weights). Stops when a step lowers the cost or moves the parameters by less than
-    1e-12 relative (MINPACK's xtol / ftol as the scipy solver used before had them), or after
-    `max_iterations` steps; every accepted step lowers the cost.
+    """(rvec | tvec) minimising sum_i w_i |project(X_i) - x_i|^2 from `start`: MINPACK's
+    Levenberg-Marquardt (scipy) on OpenCV's analytic Jacobian, what solvePnPRefineLM does for
+    equal weights. scipy.optimize is imported here, on the first frame with a down-weighted
+    landmark, not with the pipeline (~0.1 s of a process's start-up).
     """
+    from scipy.optimize import least_squares
+
     scale = np.repeat(np.sqrt(np.asarray(weights, dtype=np.float64)), 2)
-    targets = np.asarray(image_points, dtype=np.float64).reshape(-1)
-    params = np.asarray(start, dtype=np.float64).copy()
 
-    def evaluate(candidate: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        projected, jac = reprojection(camera, object_points, candidate[:3], candidate[3:])
-        return scale * (projected.reshape(-1) - targets), scale[:, None] * jac
+    def residuals(params: np.ndarray) -> np.ndarray:
+        projected, _ = reprojection(camera, object_points, params[:3], params[3:])
+        return scale * (projected - image_points).reshape(-1)
 
-    residual, jac = evaluate(params)
-    cost = float(residual @ residual)
-    damping = 1e-3
-    for _ in range(max_iterations):
-        normal = jac.T @ jac
-        gradient = jac.T @ residual
-        damped = normal + damping * np.diag(np.maximum(np.diag(normal), 1e-12))
-        try:
-            step = -np.linalg.solve(damped, gradient)
-        except np.linalg.LinAlgError:
-            break
-        trial = params + step
-        trial_residual, trial_jac = evaluate(trial)
-        trial_cost = float(trial_residual @ trial_residual)
-        if trial_cost < cost:
-            small_step = np.linalg.norm(step) <= 1e-12 * (np.linalg.norm(params) + 1e-12)
-            small_gain = cost - trial_cost <= 1e-12 * cost
-            params, residual, jac, cost = trial, trial_residual, trial_jac, trial_cost
-            damping = max(damping / 10.0, 1e-12)
-            if small_step or small_gain:
-                break
-        else:
-            damping *= 10.0
-            if damping > 1e12:
-                break
-    return params
+    def jacobian(params: np.ndarray) -> np.ndarray:
+        _, jac = reprojection(camera, object_points, params[:3], params[3:])
+        return scale[:, None] * jac
+
+    start = np.asarray(start, dtype=np.float64)
+    return least_squares(residuals, start, jac=jacobian, method="lm", xtol=1e-12, ftol=1e-12).x
 
 
 def solve_pose(
