@@ -7,6 +7,7 @@ the controller (app/controller.py) holds the state.
 
 from __future__ import annotations
 
+import math
 import threading
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -450,9 +451,26 @@ def compact_box(box: Box) -> str:
     return ", ".join(f"{round(value, 1):g}" for value in box)
 
 
+def _residuals_at_cursor(controller: TabController) -> dict[str, float]:
+    """Target id -> reprojection error (px) of its box centre: under the current frame's pose
+    for a target whose landmark the pose reprojected, else under the last correspondence
+    search's assignment (targets tied by a boxes file or a reopened session have no search)."""
+    last = controller.ties.last
+    residuals = {} if last is None else dict(last.residuals)
+    run = controller.run
+    pose = None if run is None else run.poses.get(controller.cursor)
+    if pose is None:
+        return residuals
+    for target in controller.targets():
+        error = pose.reprojection_errors.get(target.landmark_id or "", math.nan)
+        if math.isfinite(error):
+            residuals[target.id] = error
+    return residuals
+
+
 def targets_table(controller: TabController) -> str:
     """The scene's landmarks (tied, or still to draw), the targets (`T1 → A`: tied to landmark
-    A; `*`: by hand) with the search's reprojection residual, the box on the current frame and
+    A; `*`: by hand) with their reprojection residual (`_residuals_at_cursor`), the box on the current frame and
     the last frame tracked, and the last landmark search's warning. Narrow enough that its
     header reads on one line at the default panel width (tests/test_app_browser_panels.py)."""
     run = controller.run
@@ -470,7 +488,7 @@ def targets_table(controller: TabController) -> str:
         parts.append("No targets yet. Shift-drag on the frame to draw one (any order).")
         return "\n\n".join(parts)
     last = controller.ties.last
-    residuals = {} if last is None else last.residuals
+    residuals = _residuals_at_cursor(controller)
     rows = ["| target | residual | box x, y, w, h | tracked to |", "|---|---|---|---|"]
     for target in targets:
         result = target.results.get(controller.cursor)

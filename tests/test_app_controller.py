@@ -104,6 +104,12 @@ def test_boxes_json_places_one_target_per_landmark(controller) -> None:
     for target in run.targets.values():  # the tracker starts from the box's pixel grid
         assert target.results[0].box == pytest.approx(boxes[target.landmark_id], abs=2.0)
     assert run.poses[0].valid and controller.cursor == 0
+    # No correspondence search ran: the residuals are the frame's pose's reprojection errors.
+    assert controller.ties.last is None
+    table = targets_table(controller)
+    for target in run.targets.values():
+        error = run.poses[0].reprojection_errors[target.landmark_id]
+        assert f"| {target.id} → {target.landmark_id} | {error:.1f} px |" in table
 
 
 def test_boxes_json_is_refused_once_targets_exist(controller) -> None:
