@@ -11,6 +11,7 @@ import pytest
 
 from autotrack.errors import InputError
 from autotrack.io.frames import InMemoryFrames, open_frames
+from autotrack.localization.localizer import LocalizerParams
 from autotrack.localization.scene import load_scene
 from autotrack.params import preset
 from autotrack.pipeline import Pipeline, Recording, localize_sequence
@@ -123,6 +124,7 @@ def test_resume_continues_with_the_recorded_tracker_parameters(scene, tmp_path) 
         run.track_to(6)
         first = run.session_path
         last_boxes = {t.id: t.results[6].box for t in run.targets.values()}
+        pose_at_resume = run.poses[6]
     session = open_session(first)
     recording = Recording(source=str(DEMO), directory=tmp_path / "second")
     with Pipeline.resume(session, open_frames(DEMO), scene=scene, recording=recording) as resumed:
@@ -130,11 +132,40 @@ def test_resume_continues_with_the_recorded_tracker_parameters(scene, tmp_path) 
         assert resumed.resume_frame == 6
         assert {t.id: t.results[6].box for t in resumed.targets.values()} == last_boxes
         assert sorted(resumed.poses) == list(range(7))
+        np.testing.assert_array_equal(resumed.poses[6].position, pose_at_resume.position)
         resumed.track_to(9)
         second = resumed.session_path
     again = open_session(second)
     assert again.metadata["resumed_from"] == str(first)
     assert int(again.frame_indices[-1]) == 9
+
+
+def test_resume_keeps_the_recorded_pose_of_the_resume_frame(scene, tmp_path) -> None:
+    with _pipeline(scene, tmp_path / "first") as run:
+        run.add_targets(0, BOXES)
+        run.track_to(4)
+        first = run.session_path
+        recorded = run.poses[4]
+    assert recorded.valid and recorded.rms_error_px > 1e-3
+    # A localiser this strict rejects every pose: re-solving the resume frame (the restarts do)
+    # would replace the pose the session showed there with an invalid one.
+    strict = LocalizerParams(max_rms_error_px=1e-6, max_landmark_error_px=1e-6)
+    recording = Recording(source=str(DEMO), directory=tmp_path / "second")
+    with Pipeline.resume(
+        open_session(first),
+        open_frames(DEMO),
+        scene=scene,
+        localizer_params=strict,
+        recording=recording,
+    ) as resumed:
+        assert resumed.resume_frame == 4
+        kept = resumed.poses[4]
+        assert kept.valid and kept.reprojection_errors == recorded.reprojection_errors
+        np.testing.assert_array_equal(kept.position, recorded.position)
+        resumed.track_to(5)
+        assert not resumed.poses[5].valid  # the strict localiser solves the frames after it
+        second = resumed.session_path
+    assert open_session(second).pose_estimates()[4].valid
 
 
 def test_localize_sequence_finds_listed_boxes_landmarks(scene) -> None:

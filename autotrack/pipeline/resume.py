@@ -5,6 +5,7 @@ from __future__ import annotations
 from typing import TYPE_CHECKING
 
 from autotrack.pipeline.targets import TrackedTarget, number_of
+from autotrack.result import PoseEstimate
 from autotrack.sessions import Session
 
 if TYPE_CHECKING:
@@ -36,16 +37,27 @@ def restore(pipeline: Pipeline, session: Session) -> None:
         for frame_index, result in sorted(recorded.results.items()):
             if frame_index <= recorded.last_box[0]:
                 pipeline._store(target, result)
-    for frame_index, pose in sorted(session.pose_estimates().items()):
+    recorded_poses = session.pose_estimates()
+    for frame_index, pose in sorted(recorded_poses.items()):
         if frame_index < resume_frame:
-            pipeline.poses[frame_index] = pose
-            recorder = pipeline._recorder_or_none()
-            if recorder is not None:
-                recorder.log_pose(pose)
+            _keep_pose(pipeline, pose)
     for frame_index, boxes in sorted(restarts.items()):
         started = pipeline._timed_start(frame_index, boxes)
         for target_id, result in started.items():
             target = pipeline.targets[target_id]
             pipeline._restart(target, target.results.get(frame_index, result))
+    # The restarts solved the resume frame again from its recorded boxes, with a localiser
+    # that has no history (no continuity prior, no peak scores): the recorded pose is the one
+    # the session showed there, so it stays.
+    if resume_frame in recorded_poses and resume_frame in pipeline.poses:
+        _keep_pose(pipeline, recorded_poses[resume_frame])
     pipeline.resume_frame = resume_frame
     pipeline._log_event("session_resumed", resume_frame, None, source=str(session.path))
+
+
+def _keep_pose(pipeline: Pipeline, pose: PoseEstimate) -> None:
+    """A recorded pose becomes the pipeline's (and the new recording's) pose of its frame."""
+    pipeline.poses[pose.frame_index] = pose
+    recorder = pipeline._recorder_or_none()
+    if recorder is not None:
+        recorder.log_pose(pose)
