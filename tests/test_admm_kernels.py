@@ -9,7 +9,7 @@ from numba import njit
 from autotrack import AutoTrack, preset
 from autotrack.evaluation.datasets import load_otb_sequence
 from autotrack.io.frames import read_image
-from autotrack.tracker import admm_kernels, dcf
+from autotrack.tracker import admm_kernels, dcf, regularization
 from tests.conftest import COLOUR_TABLE, needs_colour_table, shared_sequence_dir
 
 
@@ -53,8 +53,55 @@ def test_admm_kernels_equal_numpy_bit_for_bit(monkeypatch, dataset, name):
             expected = multiplier.copy()
             expected += np.float32(gamma) * (g_prev - xf)
             got = multiplier.copy()
-            admm_kernels.update_multiplier(got, g_prev, xf, np.float32(gamma))
+            admm_kernels.update_multiplier(got, g_prev, xf, np.float32(gamma), got)
             np.testing.assert_array_equal(got, expected)
+            # from a zero multiplier into another buffer (ADMM's first update)
+            expected = np.zeros_like(xf)
+            expected += np.float32(gamma) * (g_prev - xf)
+            got = np.full_like(xf, np.nan)
+            admm_kernels.update_multiplier(np.zeros_like(xf), g_prev, xf, np.float32(gamma), got)
+            np.testing.assert_array_equal(got.view(np.uint64), expected.view(np.uint64))
+
+
+def _train_filter_before_the_workspace(
+    xf, yf, g_prev, window, theta_start, settings, transform, rule
+):
+    """train_filter as it was before its buffers were kept across frames: new zero spectra for
+    h and the multiplier, numpy's channel sums, the multiplier updated in numpy."""
+    cells = transform.grid_size[0] * transform.grid_size[1]
+    h_f, l_f = np.zeros_like(xf), np.zeros_like(xf)
+    s_xx = np.sum(xf.real**2 + xf.imag**2, axis=0)
+    s_gx = np.sum(np.conj(xf) * g_prev, axis=0)
+    gamma, theta = settings.gamma_init, theta_start
+    for iteration in range(1, settings.iterations + 1):
+        args = (xf, yf, h_f, l_f, g_prev, s_xx, s_gx, gamma, theta, cells, iteration == 1)
+        g_f = dcf.solve_g_step(*args)
+        if iteration == settings.iterations:
+            break
+        h_f = dcf.solve_h_step(g_f, l_f, window, gamma, settings.lambda_spatial, transform)
+        theta = rule(g_f, iteration)
+        l_f += np.float32(gamma) * (g_f - h_f)
+        gamma = min(settings.gamma_step * gamma, settings.gamma_max)
+    return g_f, theta
+
+
+@needs_colour_table
+@pytest.mark.parametrize(("dataset", "name"), SEQUENCES)
+def test_training_with_kept_buffers_equals_fresh_buffers_bit_for_bit(monkeypatch, dataset, name):
+    """The workspace's buffers, reused frame after frame (the tracker's own, left as its last
+    training left them), give the filters of fresh zero buffers and numpy's sums."""
+    settings = dcf.AdmmSettings(4, 1.0, 1.0, 10.0, 1e4)
+    trainings = _training_inputs(monkeypatch, dataset, name, frames=8)
+    yf = dcf.to_spectrum(dcf.gaussian_label(trainings[0][3].grid_size, 2.1).astype(np.float32))
+    for xf, g_prev, window, transform in trainings:
+        for theta_ref in (0.0, 13.0):
+            rule = regularization.theta_update("release", theta_ref, g_prev, transform.grid_size)
+            expected = _train_filter_before_the_workspace(
+                xf, yf, g_prev, window, 13.0, settings, transform, rule
+            )
+            got = dcf.train_filter(xf, yf, g_prev, window, 13.0, settings, transform, rule)
+            np.testing.assert_array_equal(got[0].view(np.uint64), expected[0].view(np.uint64))
+            assert got[1] == expected[1]
 
 
 @needs_colour_table

@@ -56,12 +56,12 @@ def apply_gain(maps, gain, out):
 
 
 @njit(cache=True, nogil=True, fastmath=False)
-def update_multiplier(l_f, g_f, h_f, gamma):
-    """In place l += gamma (g - h), the multiplier update (eq. 14); numpy:
-    l_f += np.float32(gamma) * (g_f - h_f)."""
+def update_multiplier(l_f, g_f, h_f, gamma, out):
+    """out = l + gamma (g - h), the multiplier update (eq. 14), in place when `out` is `l_f`;
+    numpy: l_f += np.float32(gamma) * (g_f - h_f)."""
     channels, rows, cols = l_f.shape
     for k in range(channels):
         for r in range(rows):
             for c in range(cols):
                 step = g_f[k, r, c] - h_f[k, r, c]
-                l_f[k, r, c] += complex(gamma * step.real, gamma * step.imag)
+                out[k, r, c] = l_f[k, r, c] + complex(gamma * step.real, gamma * step.imag)

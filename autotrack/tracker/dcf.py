@@ -98,6 +98,7 @@ class SpectrumTransform:
         # same rounding): its input is written in place by a kernel, and `forward` re-targeting
         # `_forward`'s output array cannot touch a live h spectrum.
         self._h_forward = plans.h_forward
+        self._workspace: AdmmWorkspace | None = None
 
     def forward(self, maps: np.ndarray) -> np.ndarray:
         """Half spectra of real maps (a new complex64 array)."""
@@ -115,6 +116,12 @@ class SpectrumTransform:
         """Real maps of half spectra, in a buffer the next `inverse_scratch` call overwrites."""
         return self._inverse(spectrum)
 
+    def workspace(self) -> AdmmWorkspace:
+        """The ADMM training's buffers for spectra of this shape (made on first use)."""
+        if self._workspace is None:
+            self._workspace = AdmmWorkspace(self._spectrum_shape)
+        return self._workspace
+
     def project(
         self, g_f: np.ndarray, l_f: np.ndarray, gamma: float, gain: np.ndarray
     ) -> np.ndarray:
@@ -126,6 +133,18 @@ class SpectrumTransform:
         maps = self._inverse()  # on its own buffers; the call (not execute) scales by 1 / N
         admm_kernels.apply_gain(maps, gain, self._h_forward.input_array)
         return self._h_forward()
+
+
+class AdmmWorkspace:
+    """Buffers of one tracker's ADMM training, reused frame after frame (a tracker trains on one
+    thread at a time): all-zero spectra standing for the first iteration's h and multiplier
+    (never written), the multiplier, a product scratch and sum_k conj(x_k) g_prev_k."""
+
+    def __init__(self, spectrum_shape: tuple[int, int, int]) -> None:
+        self.zeros = np.zeros(spectrum_shape, np.complex64)
+        self.multiplier = np.empty(spectrum_shape, np.complex64)
+        self.product = np.empty(spectrum_shape, np.complex64)
+        self.s_gx_prev = np.empty(spectrum_shape[1:], np.complex64)
 
 
 def half_spectrum_weights(grid_size: tuple[int, int]) -> np.ndarray:
@@ -294,11 +313,13 @@ def train_filter(
     (eq. 13); it returns None to keep theta unchanged.
     """
     num_cells = transform.grid_size[0] * transform.grid_size[1]
-    g_f = h_f = np.zeros_like(xf)  # h and the multiplier start at 0; g is set first
-    l_f = np.zeros_like(xf)
+    work = transform.workspace()
+    g_f = h_f = l_f = work.zeros  # h and the multiplier start at 0; g is set first
     s_xx = np.empty(xf.shape[1:], np.float32)
     admm_kernels.channel_energy(xf, s_xx)
-    s_gx_prev = np.sum(np.conj(xf) * g_prev, axis=0)
+    # numpy's np.sum(np.conj(xf) * g_prev, axis=0) in the workspace's buffers
+    np.multiply(np.conjugate(xf, out=work.product), g_prev, out=work.product)
+    s_gx_prev = np.sum(work.product, axis=0, out=work.s_gx_prev)
     gamma = float(settings.gamma_init)
     theta = float(theta_start)
     for iteration in range(1, settings.iterations + 1):
@@ -312,7 +333,9 @@ def train_filter(
             new_theta = theta_of_filter(g_f, iteration)
             if new_theta is not None:
                 theta = float(new_theta)
-        admm_kernels.update_multiplier(l_f, g_f, h_f, np.float32(gamma))  # eq. 14
+        # eq. 14: l += gamma (g - h), the first time from the zeros into the multiplier buffer
+        admm_kernels.update_multiplier(l_f, g_f, h_f, np.float32(gamma), work.multiplier)
+        l_f = work.multiplier
         gamma = min(settings.gamma_step * gamma, settings.gamma_max)
     return g_f, theta
 
@@ -321,6 +344,25 @@ def detection_response(g_f: np.ndarray, zf: np.ndarray, grid_size: tuple[int, in
     """Response map R = F^-1 sum_k conj(g_k) z_k (eq. 16), real, peak at the origin if no motion."""
     response_f = np.einsum("krc,krc->rc", np.conj(g_f), zf)
     return from_spectrum(response_f, grid_size)
+
+
+def centred_response(response: np.ndarray) -> np.ndarray:
+    """The response with zero displacement at the map centre, as float32:
+    `np.fft.fftshift(response).astype(np.float32)` in one compiled copy."""
+    centred = np.empty(response.shape, np.float32)
+    _half_rolled(response, centred)
+    return centred
+
+
+@njit(cache=True, nogil=True)
+def _half_rolled(values, out):
+    """out = np.roll(values, (rows // 2, cols // 2), axis=(0, 1)), cast to out's type."""
+    rows, cols = values.shape
+    shift_r, shift_c = rows // 2, cols // 2
+    for r in range(rows):
+        source = values[r - shift_r if r >= shift_r else r - shift_r + rows]
+        for c in range(cols):
+            out[r, c] = source[c - shift_c if c >= shift_c else c - shift_c + cols]
 
 
 @njit(cache=True, nogil=True, fastmath=False)

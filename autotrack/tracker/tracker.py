@@ -209,7 +209,7 @@ class AutoTrack:
             frame_index=self.frame_number - 1,
             box=self._box(),
             peak_score=peak_score,
-            response_map=np.fft.fftshift(response).astype(np.float32),
+            response_map=dcf.centred_response(response),
             local_variation=variation,
             global_variation=eta,
             theta_ref=float(theta_ref),
