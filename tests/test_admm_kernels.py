@@ -246,3 +246,16 @@ def test_newton_kernel_equals_the_numpy_newton_peak(monkeypatch, dataset, name):
         expected = _newton_peak_in_numpy(response, 5)
         np.testing.assert_allclose(got[:2], expected[:2], rtol=0, atol=1e-6)
         assert got[2] == pytest.approx(expected[2], rel=1e-6)
+
+
+@needs_colour_table
+@pytest.mark.parametrize(("dataset", "name"), SEQUENCES)
+def test_correlation_kernel_equals_numpy_einsum_bit_for_bit(monkeypatch, dataset, name):
+    """Detection's sum_k conj(g_k) z_k (eq. 16) gives np.einsum's spectrum exactly, on filters
+    and features of real sequences."""
+    trainings = _training_inputs(monkeypatch, dataset, name, frames=8)
+    for (xf, g_prev, _, _), (later_xf, _, _, _) in zip(trainings, trainings[1:], strict=False):
+        for filter_f, features_f in ((g_prev, xf), (g_prev, later_xf), (xf, g_prev)):
+            expected = np.einsum("krc,krc->rc", np.conj(filter_f), features_f)
+            got = dcf.correlation_spectrum(filter_f, features_f)
+            np.testing.assert_array_equal(got.view(np.uint64), expected.view(np.uint64))

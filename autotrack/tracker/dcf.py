@@ -342,8 +342,30 @@ def train_filter(
 
 def detection_response(g_f: np.ndarray, zf: np.ndarray, grid_size: tuple[int, int]) -> np.ndarray:
     """Response map R = F^-1 sum_k conj(g_k) z_k (eq. 16), real, peak at the origin if no motion."""
-    response_f = np.einsum("krc,krc->rc", np.conj(g_f), zf)
-    return from_spectrum(response_f, grid_size)
+    return from_spectrum(correlation_spectrum(g_f, zf), grid_size)
+
+
+def correlation_spectrum(g_f: np.ndarray, zf: np.ndarray) -> np.ndarray:
+    """sum_k conj(g_k) z_k per frequency: `np.einsum("krc,krc->rc", np.conj(g_f), zf)` in one
+    compiled pass, in its operations (complex64, each product and sum rounded on its own, the
+    channels added in order), without the conjugated copy."""
+    out = np.empty(zf.shape[1:], np.complex64)
+    _correlation_kernel(g_f, zf, out)
+    return out
+
+
+@njit(cache=True, nogil=True, fastmath=False)
+def _correlation_kernel(g_f, zf, out):
+    channels, rows, cols = zf.shape
+    out[:] = 0
+    for k in range(channels):
+        for r in range(rows):
+            for c in range(cols):
+                g, z, total = g_f[k, r, c], zf[k, r, c], out[r, c]
+                g_re, g_im = g.real, -g.imag  # conj(g)
+                re = g_re * z.real - g_im * z.imag
+                im = g_re * z.imag + g_im * z.real
+                out[r, c] = complex(re + total.real, im + total.imag)
 
 
 def centred_response(response: np.ndarray) -> np.ndarray:
