@@ -98,7 +98,7 @@ class SpectrumTransform:
         # same rounding): its input is written in place by a kernel, and `forward` re-targeting
         # `_forward`'s output array cannot touch a live h spectrum.
         self._h_forward = plans.h_forward
-        self._workspace: AdmmWorkspace | None = None
+        self._workspace: admm_kernels.AdmmWorkspace | None = None
 
     def forward(self, maps: np.ndarray) -> np.ndarray:
         """Half spectra of real maps (a new complex64 array)."""
@@ -116,10 +116,10 @@ class SpectrumTransform:
         """Real maps of half spectra, in a buffer the next `inverse_scratch` call overwrites."""
         return self._inverse(spectrum)
 
-    def workspace(self) -> AdmmWorkspace:
+    def workspace(self) -> admm_kernels.AdmmWorkspace:
         """The ADMM training's buffers for spectra of this shape (made on first use)."""
         if self._workspace is None:
-            self._workspace = AdmmWorkspace(self._spectrum_shape)
+            self._workspace = admm_kernels.AdmmWorkspace(self._spectrum_shape)
         return self._workspace
 
     def project(
@@ -133,18 +133,6 @@ class SpectrumTransform:
         maps = self._inverse()  # on its own buffers; the call (not execute) scales by 1 / N
         admm_kernels.apply_gain(maps, gain, self._h_forward.input_array)
         return self._h_forward()
-
-
-class AdmmWorkspace:
-    """Buffers of one tracker's ADMM training, reused frame after frame (a tracker trains on one
-    thread at a time): all-zero spectra standing for the first iteration's h and multiplier
-    (never written), the multiplier, a product scratch and sum_k conj(x_k) g_prev_k."""
-
-    def __init__(self, spectrum_shape: tuple[int, int, int]) -> None:
-        self.zeros = np.zeros(spectrum_shape, np.complex64)
-        self.multiplier = np.empty(spectrum_shape, np.complex64)
-        self.product = np.empty(spectrum_shape, np.complex64)
-        self.s_gx_prev = np.empty(spectrum_shape[1:], np.complex64)
 
 
 def half_spectrum_weights(grid_size: tuple[int, int]) -> np.ndarray:
@@ -306,20 +294,27 @@ def train_filter(
     settings: AdmmSettings,
     transform: SpectrumTransform,
     theta_of_filter=None,
+    shift: tuple[float, float] | None = None,
 ) -> tuple[np.ndarray, float]:
     """ADMM on the AutoTrack objective (eqs. 5-15); returns the filter and the last theta used.
 
     `theta_of_filter(g_f, iteration)` re-estimates theta after the g/h steps of an iteration
-    (eq. 13); it returns None to keep theta unchanged.
+    (eq. 13); it returns None to keep theta unchanged. `shift` (rows, cols) in cells trains on
+    `xf` moved as `shift_spectrum` moves it (the release's reuse of the detection features).
     """
     num_cells = transform.grid_size[0] * transform.grid_size[1]
     work = transform.workspace()
     g_f = h_f = l_f = work.zeros  # h and the multiplier start at 0; g is set first
-    s_xx = np.empty(xf.shape[1:], np.float32)
-    admm_kernels.channel_energy(xf, s_xx)
-    # numpy's np.sum(np.conj(xf) * g_prev, axis=0) in the workspace's buffers
-    np.multiply(np.conjugate(xf, out=work.product), g_prev, out=work.product)
-    s_gx_prev = np.sum(work.product, axis=0, out=work.s_gx_prev)
+    phase = (
+        admm_kernels.NO_PHASE
+        if shift is None
+        else shift_phase(*shift, transform.grid_size, xf.shape[-1])
+    )
+    s_xx, s_gx_prev = work.s_xx, work.s_gx_prev
+    fused = admm_kernels.NUMPY_FUSES_COMPLEX_PRODUCTS
+    args = (xf, phase, shift is not None, g_prev, fused, work.features, s_xx, s_gx_prev)
+    admm_kernels.training_input(*args)
+    xf = work.features
     gamma = float(settings.gamma_init)
     theta = float(theta_start)
     for iteration in range(1, settings.iterations + 1):
@@ -479,10 +474,18 @@ def shift_spectrum(
     """Translate feature maps by (shift_rows, shift_cols) cells in the Fourier domain.
 
     Used to train on the detection features moved to the new target position instead of
-    extracting a new patch (release behaviour).
+    extracting a new patch (release behaviour; `train_filter(shift=...)` does it in its first
+    pass).
     """
+    return xf * shift_phase(shift_rows, shift_cols, grid_size, xf.shape[-1])
+
+
+def shift_phase(
+    shift_rows: float, shift_cols: float, grid_size: tuple[int, int], half_cols: int
+) -> np.ndarray:
+    """The (rows, half_cols) complex64 phase ramp that moves a half spectrum by the shift."""
     ky = centred_frequencies(grid_size[0])
-    kx = np.arange(xf.shape[-1], dtype=np.float64)
+    kx = np.arange(half_cols, dtype=np.float64)
     phase_rows = np.exp(1j * (2.0 * np.pi * shift_rows / grid_size[0]) * ky).astype(np.complex64)
     phase_cols = np.exp(1j * (2.0 * np.pi * shift_cols / grid_size[1]) * kx).astype(np.complex64)
-    return xf * (phase_rows[:, None] * phase_cols[None, :])
+    return phase_rows[:, None] * phase_cols[None, :]
