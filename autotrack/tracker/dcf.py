@@ -393,12 +393,13 @@ def _newton_kernel(response_f, ky, kx, ky_sq, kx_sq, pos_y, pos_x, iterations):
         y_resp = np.zeros(cols, np.complex128)  # exp_iky @ F
         resp_x = np.zeros(rows, np.complex128)  # F @ exp_ikx
         resp_kx = np.zeros(rows, np.complex128)  # F @ (kx exp_ikx)
+        kx_exp = kx * exp_ikx  # the same products the loop took per row, taken once
         for r in range(rows):
             for c in range(cols):
                 value = response_f[r, c]
                 y_resp[c] += exp_iky[r] * value
                 resp_x[r] += value * exp_ikx[c]
-                resp_kx[r] += value * (kx[c] * exp_ikx[c])
+                resp_kx[r] += value * kx_exp[c]
         grad_y_sum = ival_sum = h_yy_sum = h_xy_sum = 0j
         for r in range(rows):
             ky_exp = ky[r] * exp_iky[r]
