@@ -39,10 +39,6 @@ SEQUENCES = [("DTB70", "Surfing06"), ("UAV123_10fps", "boat5"), ("OTB", "Crossin
 @pytest.mark.parametrize(("dataset", "name"), SEQUENCES)
 def test_admm_kernels_equal_numpy_bit_for_bit(monkeypatch, dataset, name):
     for xf, g_prev, _, _ in _training_inputs(monkeypatch, dataset, name):
-        energy = np.empty(xf.shape[1:], np.float32)
-        admm_kernels.channel_energy(xf, energy)
-        np.testing.assert_array_equal(energy, np.sum(xf.real**2 + xf.imag**2, axis=0))
-
         multiplier = (xf - g_prev) * np.float32(0.37)
         for gamma in (1.0, 10.0, 0.7312):
             expected = np.float32(gamma) * (g_prev + multiplier)

@@ -28,21 +28,6 @@ from numba.core.extending import intrinsic
 
 
 @njit(cache=True, nogil=True, fastmath=False)
-def channel_energy(xf, out):
-    """out = sum_k |x_k|^2 per frequency (float32); numpy: np.sum(xf.real**2 + xf.imag**2, axis=0)."""
-    channels, rows, cols = xf.shape
-    for r in range(rows):
-        for c in range(cols):
-            x = xf[0, r, c]
-            out[r, c] = x.real * x.real + x.imag * x.imag
-    for k in range(1, channels):
-        for r in range(rows):
-            for c in range(cols):
-                x = xf[k, r, c]
-                out[r, c] += x.real * x.real + x.imag * x.imag
-
-
-@njit(cache=True, nogil=True, fastmath=False)
 def scaled_sum(g_f, l_f, gamma, out):
     """out = gamma (g + l), the h-step's right-hand side (eq. 12); numpy:
     np.float32(gamma) * (g_f + l_f)."""
@@ -121,7 +106,8 @@ NUMPY_FUSES_COMPLEX_PRODUCTS = _numpy_fuses_complex_products()
 def training_input(zf, phase, shift, g_prev, fused, xf, energy, s_gx_prev):
     """The training's per-frame inputs in one pass over the detection features `zf`:
     xf = zf * phase[None] when `shift` (the features moved in the Fourier domain; numpy:
-    `zf * phase`), else a copy of zf; energy = sum_k |x_k|^2 (`channel_energy`); s_gx_prev =
+    `zf * phase`), else a copy of zf; energy = sum_k |x_k|^2 (numpy:
+    `np.sum(xf.real**2 + xf.imag**2, axis=0)`); s_gx_prev =
     sum_k conj(x_k) g_prev_k (numpy: `np.sum(np.conj(xf) * g_prev, axis=0)`); channel sums
     channel after channel, complex products as numpy's (`fused`)."""
     channels, rows, cols = zf.shape
