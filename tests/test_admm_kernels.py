@@ -9,7 +9,7 @@ from numba import njit
 from autotrack import AutoTrack, preset
 from autotrack.evaluation.datasets import load_otb_sequence
 from autotrack.io.frames import read_image
-from autotrack.tracker import admm_kernels, dcf
+from autotrack.tracker import admm_kernels, dcf, regularization
 from tests.conftest import COLOUR_TABLE, needs_colour_table, shared_sequence_dir
 
 
@@ -39,10 +39,6 @@ SEQUENCES = [("DTB70", "Surfing06"), ("UAV123_10fps", "boat5"), ("OTB", "Crossin
 @pytest.mark.parametrize(("dataset", "name"), SEQUENCES)
 def test_admm_kernels_equal_numpy_bit_for_bit(monkeypatch, dataset, name):
     for xf, g_prev, _, _ in _training_inputs(monkeypatch, dataset, name):
-        energy = np.empty(xf.shape[1:], np.float32)
-        admm_kernels.channel_energy(xf, energy)
-        np.testing.assert_array_equal(energy, np.sum(xf.real**2 + xf.imag**2, axis=0))
-
         multiplier = (xf - g_prev) * np.float32(0.37)
         for gamma in (1.0, 10.0, 0.7312):
             expected = np.float32(gamma) * (g_prev + multiplier)
@@ -53,8 +49,84 @@ def test_admm_kernels_equal_numpy_bit_for_bit(monkeypatch, dataset, name):
             expected = multiplier.copy()
             expected += np.float32(gamma) * (g_prev - xf)
             got = multiplier.copy()
-            admm_kernels.update_multiplier(got, g_prev, xf, np.float32(gamma))
+            admm_kernels.update_multiplier(got, g_prev, xf, np.float32(gamma), got)
             np.testing.assert_array_equal(got, expected)
+            # from a zero multiplier into another buffer (ADMM's first update)
+            expected = np.zeros_like(xf)
+            expected += np.float32(gamma) * (g_prev - xf)
+            got = np.full_like(xf, np.nan)
+            admm_kernels.update_multiplier(np.zeros_like(xf), g_prev, xf, np.float32(gamma), got)
+            np.testing.assert_array_equal(got.view(np.uint64), expected.view(np.uint64))
+
+
+def _train_filter_before_the_workspace(
+    xf, yf, g_prev, window, theta_start, settings, transform, rule
+):
+    """train_filter as it was before its buffers were kept across frames: new zero spectra for
+    h and the multiplier, numpy's channel sums, the multiplier updated in numpy."""
+    cells = transform.grid_size[0] * transform.grid_size[1]
+    h_f, l_f = np.zeros_like(xf), np.zeros_like(xf)
+    s_xx = np.sum(xf.real**2 + xf.imag**2, axis=0)
+    s_gx = np.sum(np.conj(xf) * g_prev, axis=0)
+    gamma, theta = settings.gamma_init, theta_start
+    for iteration in range(1, settings.iterations + 1):
+        args = (xf, yf, h_f, l_f, g_prev, s_xx, s_gx, gamma, theta, cells, iteration == 1)
+        g_f = dcf.solve_g_step(*args)
+        if iteration == settings.iterations:
+            break
+        h_f = dcf.solve_h_step(g_f, l_f, window, gamma, settings.lambda_spatial, transform)
+        theta = rule(g_f, iteration)
+        l_f += np.float32(gamma) * (g_f - h_f)
+        gamma = min(settings.gamma_step * gamma, settings.gamma_max)
+    return g_f, theta
+
+
+@needs_colour_table
+@pytest.mark.parametrize(("dataset", "name"), SEQUENCES)
+def test_training_with_kept_buffers_equals_fresh_buffers_bit_for_bit(monkeypatch, dataset, name):
+    """The workspace's buffers, reused frame after frame (the tracker's own, left as its last
+    training left them), give the filters of fresh zero buffers and numpy's sums."""
+    settings = dcf.AdmmSettings(4, 1.0, 1.0, 10.0, 1e4)
+    trainings = _training_inputs(monkeypatch, dataset, name, frames=8)
+    yf = dcf.to_spectrum(dcf.gaussian_label(trainings[0][3].grid_size, 2.1).astype(np.float32))
+    for xf, g_prev, window, transform in trainings:
+        for theta_ref, shift in ((0.0, None), (13.0, None), (13.0, (0.0, 0.0)), (5.0, (1.3, -2.6))):
+            rule = regularization.theta_update("release", theta_ref, g_prev, transform.grid_size)
+            moved = xf if shift is None else dcf.shift_spectrum(xf, *shift, transform.grid_size)
+            expected = _train_filter_before_the_workspace(
+                moved, yf, g_prev, window, 13.0, settings, transform, rule
+            )
+            args = (xf, yf, g_prev, window, 13.0, settings, transform, rule, shift)
+            got = dcf.train_filter(*args)
+            np.testing.assert_array_equal(got[0].view(np.uint64), expected[0].view(np.uint64))
+            assert got[1] == expected[1]
+
+
+@needs_colour_table
+@pytest.mark.parametrize(("dataset", "name"), SEQUENCES)
+def test_training_input_equals_numpy_shift_and_sums_bit_for_bit(monkeypatch, dataset, name):
+    """One pass gives numpy's shifted features (`xf * phase`), sum_k |x_k|^2 and
+    `np.sum(np.conj(xf) * g_prev, axis=0)` exactly: numpy's complex products, fused or not as
+    this machine's numpy computes them."""
+    rng = np.random.default_rng(8)
+    fused = admm_kernels.NUMPY_FUSES_COMPLEX_PRODUCTS
+    for zf, g_prev, _, transform in _training_inputs(monkeypatch, dataset, name):
+        grid = transform.grid_size
+        for shift in (None, (0.0, 0.0), tuple(rng.uniform(-4.0, 4.0, 2))):
+            moved = zf if shift is None else dcf.shift_spectrum(zf, *shift, grid)
+            phase = np.ones((1, 1), np.complex64)
+            if shift is not None:
+                phase = dcf.shift_phase(*shift, grid, zf.shape[-1])
+            xf = np.full_like(zf, np.nan)
+            energy = np.full(zf.shape[1:], np.nan, np.float32)
+            s_gx = np.full(zf.shape[1:], np.nan, np.complex64)
+            args = (zf, phase, shift is not None, g_prev, fused, xf, energy, s_gx)
+            admm_kernels.training_input(*args)
+            np.testing.assert_array_equal(xf.view(np.uint64), moved.view(np.uint64))
+            expected_energy = np.sum(moved.real**2 + moved.imag**2, axis=0)
+            np.testing.assert_array_equal(energy.view(np.uint32), expected_energy.view(np.uint32))
+            expected_s_gx = np.sum(np.conj(moved) * g_prev, axis=0)
+            np.testing.assert_array_equal(s_gx.view(np.uint64), expected_s_gx.view(np.uint64))
 
 
 @needs_colour_table
@@ -199,3 +271,16 @@ def test_newton_kernel_equals_the_numpy_newton_peak(monkeypatch, dataset, name):
         expected = _newton_peak_in_numpy(response, 5)
         np.testing.assert_allclose(got[:2], expected[:2], rtol=0, atol=1e-6)
         assert got[2] == pytest.approx(expected[2], rel=1e-6)
+
+
+@needs_colour_table
+@pytest.mark.parametrize(("dataset", "name"), SEQUENCES)
+def test_correlation_kernel_equals_numpy_einsum_bit_for_bit(monkeypatch, dataset, name):
+    """Detection's sum_k conj(g_k) z_k (eq. 16) gives np.einsum's spectrum exactly, on filters
+    and features of real sequences."""
+    trainings = _training_inputs(monkeypatch, dataset, name, frames=8)
+    for (xf, g_prev, _, _), (later_xf, _, _, _) in zip(trainings, trainings[1:], strict=False):
+        for filter_f, features_f in ((g_prev, xf), (g_prev, later_xf), (xf, g_prev)):
+            expected = np.einsum("krc,krc->rc", np.conj(filter_f), features_f)
+            got = dcf.correlation_spectrum(filter_f, features_f)
+            np.testing.assert_array_equal(got.view(np.uint64), expected.view(np.uint64))

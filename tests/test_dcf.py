@@ -6,6 +6,7 @@ import math
 
 import numpy as np
 import pytest
+import scipy.linalg
 
 from autotrack.tracker import dcf, regularization
 
@@ -177,6 +178,26 @@ def test_global_variation_uses_the_spectral_norm_and_flags_blow_ups():
     assert not regularization.is_aberrant(0.29, 0.3)
 
 
+def test_global_variation_equals_scipy_svdvals_bit_for_bit():
+    """The direct LAPACK call gives scipy.linalg.svdvals's largest singular value exactly."""
+    rng = np.random.default_rng(6)
+    for shape in ((50, 50), (38, 38), (44, 50)):
+        for _ in range(10):
+            variation = np.abs(rng.standard_normal(shape) ** 3).astype(np.float32)
+            expected = scipy.linalg.svdvals(variation.astype(np.float64))[0] * 1e-4
+            assert regularization.global_variation(variation) == expected
+
+
+def test_centred_response_is_numpys_fftshift_as_float32():
+    rng = np.random.default_rng(7)
+    for shape in ((50, 50), (37, 44), (1, 1), (2, 3)):
+        for dtype in (np.float32, np.float64):
+            response = rng.standard_normal(shape).astype(dtype)
+            centred = dcf.centred_response(response)
+            assert centred.dtype == np.float32
+            np.testing.assert_array_equal(centred, np.fft.fftshift(response).astype(np.float32))
+
+
 def test_temporal_reference_matches_paper_scaling():
     # Release: zeta / (1 + log(0.2 * ||Pi|| / 1e4 + 1)) == paper: nu = 2e-5 on the raw norm.
     raw_norm = 2500.0
@@ -202,11 +223,14 @@ def test_adaptive_window_replaces_only_the_target_region():
 
 
 def test_local_variation_equals_aligning_then_centring_bit_for_bit():
-    """One roll per map (the shifts combined) gives the release's align-then-centre Pi exactly."""
+    """The compiled pass (one shift per map, the shifts combined) gives the release's numpy
+    align-then-centre Pi exactly, zeros of the previous map (inf, NaN) and float64 maps included."""
     rng = np.random.default_rng(4)
-    for shape in ((50, 50), (37, 44)):
+    for shape, dtype in (((50, 50), np.float32), ((37, 44), np.float32), ((38, 41), np.float64)):
         for _ in range(20):
-            response, previous = rng.standard_normal((2, *shape)).astype(np.float32)
+            response, previous = rng.standard_normal((2, *shape)).astype(dtype)
+            previous[rng.integers(0, shape[0], 5), rng.integers(0, shape[1], 5)] = 0.0
+            response[0, :3] = previous[0, :3] = 0.0  # 0 / 0 wherever the shifts bring them
             shifts = rng.uniform(-25.0, 25.0, 4)
             aligned = np.roll(response, (-math.floor(shifts[0]), -math.floor(shifts[1])), (0, 1))
             before = np.roll(previous, (-math.floor(shifts[2]), -math.floor(shifts[3])), (0, 1))

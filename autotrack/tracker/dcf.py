@@ -98,6 +98,7 @@ class SpectrumTransform:
         # same rounding): its input is written in place by a kernel, and `forward` re-targeting
         # `_forward`'s output array cannot touch a live h spectrum.
         self._h_forward = plans.h_forward
+        self._workspace: admm_kernels.AdmmWorkspace | None = None
 
     def forward(self, maps: np.ndarray) -> np.ndarray:
         """Half spectra of real maps (a new complex64 array)."""
@@ -114,6 +115,12 @@ class SpectrumTransform:
     def inverse_scratch(self, spectrum: np.ndarray) -> np.ndarray:
         """Real maps of half spectra, in a buffer the next `inverse_scratch` call overwrites."""
         return self._inverse(spectrum)
+
+    def workspace(self) -> admm_kernels.AdmmWorkspace:
+        """The ADMM training's buffers for spectra of this shape (made on first use)."""
+        if self._workspace is None:
+            self._workspace = admm_kernels.AdmmWorkspace(self._spectrum_shape)
+        return self._workspace
 
     def project(
         self, g_f: np.ndarray, l_f: np.ndarray, gamma: float, gain: np.ndarray
@@ -287,18 +294,27 @@ def train_filter(
     settings: AdmmSettings,
     transform: SpectrumTransform,
     theta_of_filter=None,
+    shift: tuple[float, float] | None = None,
 ) -> tuple[np.ndarray, float]:
     """ADMM on the AutoTrack objective (eqs. 5-15); returns the filter and the last theta used.
 
     `theta_of_filter(g_f, iteration)` re-estimates theta after the g/h steps of an iteration
-    (eq. 13); it returns None to keep theta unchanged.
+    (eq. 13); it returns None to keep theta unchanged. `shift` (rows, cols) in cells trains on
+    `xf` moved as `shift_spectrum` moves it (the release's reuse of the detection features).
     """
     num_cells = transform.grid_size[0] * transform.grid_size[1]
-    g_f = h_f = np.zeros_like(xf)  # h and the multiplier start at 0; g is set first
-    l_f = np.zeros_like(xf)
-    s_xx = np.empty(xf.shape[1:], np.float32)
-    admm_kernels.channel_energy(xf, s_xx)
-    s_gx_prev = np.sum(np.conj(xf) * g_prev, axis=0)
+    work = transform.workspace()
+    g_f = h_f = l_f = work.zeros  # h and the multiplier start at 0; g is set first
+    phase = (
+        admm_kernels.NO_PHASE
+        if shift is None
+        else shift_phase(*shift, transform.grid_size, xf.shape[-1])
+    )
+    s_xx, s_gx_prev = work.s_xx, work.s_gx_prev
+    fused = admm_kernels.NUMPY_FUSES_COMPLEX_PRODUCTS
+    args = (xf, phase, shift is not None, g_prev, fused, work.features, s_xx, s_gx_prev)
+    admm_kernels.training_input(*args)
+    xf = work.features
     gamma = float(settings.gamma_init)
     theta = float(theta_start)
     for iteration in range(1, settings.iterations + 1):
@@ -312,15 +328,58 @@ def train_filter(
             new_theta = theta_of_filter(g_f, iteration)
             if new_theta is not None:
                 theta = float(new_theta)
-        admm_kernels.update_multiplier(l_f, g_f, h_f, np.float32(gamma))  # eq. 14
+        # eq. 14: l += gamma (g - h), the first time from the zeros into the multiplier buffer
+        admm_kernels.update_multiplier(l_f, g_f, h_f, np.float32(gamma), work.multiplier)
+        l_f = work.multiplier
         gamma = min(settings.gamma_step * gamma, settings.gamma_max)
     return g_f, theta
 
 
 def detection_response(g_f: np.ndarray, zf: np.ndarray, grid_size: tuple[int, int]) -> np.ndarray:
     """Response map R = F^-1 sum_k conj(g_k) z_k (eq. 16), real, peak at the origin if no motion."""
-    response_f = np.einsum("krc,krc->rc", np.conj(g_f), zf)
-    return from_spectrum(response_f, grid_size)
+    return from_spectrum(correlation_spectrum(g_f, zf), grid_size)
+
+
+def correlation_spectrum(g_f: np.ndarray, zf: np.ndarray) -> np.ndarray:
+    """sum_k conj(g_k) z_k per frequency: `np.einsum("krc,krc->rc", np.conj(g_f), zf)` in one
+    compiled pass, in its operations (complex64, each product and sum rounded on its own, the
+    channels added in order), without the conjugated copy."""
+    out = np.empty(zf.shape[1:], np.complex64)
+    _correlation_kernel(g_f, zf, out)
+    return out
+
+
+@njit(cache=True, nogil=True, fastmath=False)
+def _correlation_kernel(g_f, zf, out):
+    channels, rows, cols = zf.shape
+    out[:] = 0
+    for k in range(channels):
+        for r in range(rows):
+            for c in range(cols):
+                g, z, total = g_f[k, r, c], zf[k, r, c], out[r, c]
+                g_re, g_im = g.real, -g.imag  # conj(g)
+                re = g_re * z.real - g_im * z.imag
+                im = g_re * z.imag + g_im * z.real
+                out[r, c] = complex(re + total.real, im + total.imag)
+
+
+def centred_response(response: np.ndarray) -> np.ndarray:
+    """The response with zero displacement at the map centre, as float32:
+    `np.fft.fftshift(response).astype(np.float32)` in one compiled copy."""
+    centred = np.empty(response.shape, np.float32)
+    _half_rolled(response, centred)
+    return centred
+
+
+@njit(cache=True, nogil=True)
+def _half_rolled(values, out):
+    """out = np.roll(values, (rows // 2, cols // 2), axis=(0, 1)), cast to out's type."""
+    rows, cols = values.shape
+    shift_r, shift_c = rows // 2, cols // 2
+    for r in range(rows):
+        source = values[r - shift_r if r >= shift_r else r - shift_r + rows]
+        for c in range(cols):
+            out[r, c] = source[c - shift_c if c >= shift_c else c - shift_c + cols]
 
 
 @njit(cache=True, nogil=True, fastmath=False)
@@ -334,12 +393,13 @@ def _newton_kernel(response_f, ky, kx, ky_sq, kx_sq, pos_y, pos_x, iterations):
         y_resp = np.zeros(cols, np.complex128)  # exp_iky @ F
         resp_x = np.zeros(rows, np.complex128)  # F @ exp_ikx
         resp_kx = np.zeros(rows, np.complex128)  # F @ (kx exp_ikx)
+        kx_exp = kx * exp_ikx  # the same products the loop took per row, taken once
         for r in range(rows):
             for c in range(cols):
                 value = response_f[r, c]
                 y_resp[c] += exp_iky[r] * value
                 resp_x[r] += value * exp_ikx[c]
-                resp_kx[r] += value * (kx[c] * exp_ikx[c])
+                resp_kx[r] += value * kx_exp[c]
         grad_y_sum = ival_sum = h_yy_sum = h_xy_sum = 0j
         for r in range(rows):
             ky_exp = ky[r] * exp_iky[r]
@@ -415,10 +475,18 @@ def shift_spectrum(
     """Translate feature maps by (shift_rows, shift_cols) cells in the Fourier domain.
 
     Used to train on the detection features moved to the new target position instead of
-    extracting a new patch (release behaviour).
+    extracting a new patch (release behaviour; `train_filter(shift=...)` does it in its first
+    pass).
     """
+    return xf * shift_phase(shift_rows, shift_cols, grid_size, xf.shape[-1])
+
+
+def shift_phase(
+    shift_rows: float, shift_cols: float, grid_size: tuple[int, int], half_cols: int
+) -> np.ndarray:
+    """The (rows, half_cols) complex64 phase ramp that moves a half spectrum by the shift."""
     ky = centred_frequencies(grid_size[0])
-    kx = np.arange(xf.shape[-1], dtype=np.float64)
+    kx = np.arange(half_cols, dtype=np.float64)
     phase_rows = np.exp(1j * (2.0 * np.pi * shift_rows / grid_size[0]) * ky).astype(np.complex64)
     phase_cols = np.exp(1j * (2.0 * np.pi * shift_cols / grid_size[1]) * kx).astype(np.complex64)
-    return xf * (phase_rows[:, None] * phase_cols[None, :])
+    return phase_rows[:, None] * phase_cols[None, :]

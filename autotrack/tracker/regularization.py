@@ -4,9 +4,11 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable
+from functools import lru_cache
 
 import numpy as np
 import scipy.linalg
+from numba import njit
 
 from autotrack.tracker.dcf import half_spectrum_weights
 
@@ -51,13 +53,44 @@ def local_variation(
     Each map is circularly shifted by its own integer peak displacement so the two peaks
     coincide; Pi = |R_t - R_{t-1}| / |R_{t-1}| elementwise. Division by a near-zero response
     gives inf/NaN entries, which the caller must treat (they make the frame aberrant).
+    Computed in one compiled pass: numpy's `np.abs(a - b) / np.abs(b)` on the two maps rolled
+    as `centred_alignment` rolls them, bit for bit (float32 maps give float32 arithmetic).
     """
-    aligned, previous_aligned = centred_alignment(
-        response, displacement, previous_response, previous_displacement
+    shift, previous_shift = _centring_shifts(response.shape, displacement, previous_displacement)
+    variation = np.empty(response.shape, np.float32)
+    _centred_variation(response, previous_response, *shift, *previous_shift, variation)
+    return variation
+
+
+@njit(cache=True, nogil=True, fastmath=False, error_model="numpy")
+def _centred_variation(response, previous, shift_r, shift_c, previous_r, previous_c, out):
+    """out = |roll(response) - roll(previous)| / |roll(previous)|, each map rolled by its own
+    (rows, cols) shift as np.roll does (out[i] = map[(i - shift) mod n])."""
+    rows, cols = response.shape
+    shift_c, previous_c = shift_c % cols, previous_c % cols
+    for r in range(rows):
+        values = response[(r - shift_r) % rows]
+        befores = previous[(r - previous_r) % rows]
+        for c in range(cols):
+            column = c - shift_c if c >= shift_c else c - shift_c + cols
+            previous_column = c - previous_c if c >= previous_c else c - previous_c + cols
+            value, before = values[column], befores[previous_column]
+            out[r, c] = abs(value - before) / abs(before)
+
+
+def _centring_shifts(
+    shape: tuple[int, ...],
+    displacement: tuple[float, float],
+    previous_displacement: tuple[float, float],
+) -> tuple[tuple[int, int], tuple[int, int]]:
+    """The (rows, cols) roll of each map that puts both peaks at the centre (eq. 2)."""
+    centre = (shape[0] // 2, shape[1] // 2)
+    shift = (centre[0] - math.floor(displacement[0]), centre[1] - math.floor(displacement[1]))
+    previous_shift = (
+        centre[0] - math.floor(previous_displacement[0]),
+        centre[1] - math.floor(previous_displacement[1]),
     )
-    with np.errstate(divide="ignore", invalid="ignore"):
-        variation = np.abs(aligned - previous_aligned) / np.abs(previous_aligned)
-    return variation.astype(np.float32, copy=False)
+    return shift, previous_shift
 
 
 def centred_alignment(
@@ -70,13 +103,7 @@ def centred_alignment(
     peaks meet at the centre: one roll per map instead of aligning first and centring the
     variation after (element-wise maths commutes with the shift, so Pi is the same bit for bit).
     """
-    rows, cols = response.shape
-    centre = (rows // 2, cols // 2)
-    shift = (centre[0] - math.floor(displacement[0]), centre[1] - math.floor(displacement[1]))
-    previous_shift = (
-        centre[0] - math.floor(previous_displacement[0]),
-        centre[1] - math.floor(previous_displacement[1]),
-    )
+    shift, previous_shift = _centring_shifts(response.shape, displacement, previous_displacement)
     return (
         np.roll(response, shift, axis=(0, 1)),
         np.roll(previous_response, previous_shift, axis=(0, 1)),
@@ -90,8 +117,27 @@ def global_variation(variation: np.ndarray) -> float:
     """
     if not np.all(np.isfinite(variation)):
         return float("inf")
-    singular_values = scipy.linalg.svdvals(variation.astype(np.float64), check_finite=False)
+    matrix = variation.astype(np.float64)
+    gesdd, lwork = _singular_value_routine(matrix.shape)
+    # scipy.linalg.svdvals(matrix, check_finite=False) without its checks: the same LAPACK
+    # routine with the same work size, so the same values
+    _, singular_values, _, info = gesdd(matrix, compute_uv=0, lwork=lwork, full_matrices=1)
+    if info != 0:
+        singular_values = scipy.linalg.svdvals(matrix, check_finite=False)  # its error
     return float(singular_values[0]) * GLOBAL_VARIATION_SCALE
+
+
+@lru_cache(maxsize=8)
+def _singular_value_routine(shape: tuple[int, int]):
+    """(LAPACK gesdd, work size) as scipy.linalg.svdvals picks them for float64 `shape`."""
+    matrix = np.zeros(shape, np.float64)
+    funcs = scipy.linalg.lapack.get_lapack_funcs(
+        ("gesdd", "gesdd_lwork"), (matrix,), ilp64="preferred"
+    )
+    lwork = scipy.linalg.lapack._compute_lwork(
+        funcs[1], shape[0], shape[1], compute_uv=False, full_matrices=True
+    )
+    return funcs[0], lwork
 
 
 def temporal_reference(eta: float, zeta: float, nu: float) -> float:

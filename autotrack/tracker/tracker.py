@@ -193,9 +193,9 @@ class AutoTrack:
         theta = float("nan")
         if not aberrant and confident:
             cells = rotation.rotate_offset(translation, -self.angle) / (p.cell_size * self.scale)
-            xf = dcf.shift_spectrum(zf, cells[0], cells[1], self.grid_size)
             theta_start = p.zeta if p.adaptive_temporal else p.fixed_theta
-            self.filter_f, theta = self._train(xf, theta_start, theta_ref)
+            shift = (float(cells[0]), float(cells[1]))
+            self.filter_f, theta = self._train(zf, theta_start, theta_ref, shift)
             if self.memory is not None and not ambiguous:
                 self.memory.learn(self.filter_f)
         if confident:
@@ -209,7 +209,7 @@ class AutoTrack:
             frame_index=self.frame_number - 1,
             box=self._box(),
             peak_score=peak_score,
-            response_map=np.fft.fftshift(response).astype(np.float32),
+            response_map=dcf.centred_response(response),
             local_variation=variation,
             global_variation=eta,
             theta_ref=float(theta_ref),
@@ -392,9 +392,14 @@ class AutoTrack:
         return regularization.theta_update(p.theta_update, theta_ref, filter_prev, self.grid_size)
 
     def _train(
-        self, xf: np.ndarray, theta_start: float, theta_ref: float
+        self,
+        xf: np.ndarray,
+        theta_start: float,
+        theta_ref: float,
+        shift: tuple[float, float] | None = None,
     ) -> tuple[np.ndarray, float]:
-        """Filter for this frame by ADMM (eqs. 8-15), warm-started from the previous one."""
+        """Filter for this frame by ADMM (eqs. 8-15), warm-started from the previous one, on
+        the features `xf` moved by `shift` cells (dcf.shift_spectrum) when given."""
         update = self._theta_update(theta_ref, self.filter_f)
         return dcf.train_filter(
             xf,
@@ -405,6 +410,7 @@ class AutoTrack:
             self.admm,
             self.transform,
             update,
+            shift,
         )
 
     def _predicted_position(self) -> np.ndarray:
