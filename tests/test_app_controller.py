@@ -20,8 +20,8 @@ import pytest
 from app.boxes import format_box, parse_box
 from app.config import AppConfig
 from app.controller import TabController
-from app.panels import targets_table
 from app.recordings import RecordingRegistry
+from app.targets_table import targets_table
 from autotrack.errors import InputError
 
 REPO = Path(__file__).resolve().parents[1]
