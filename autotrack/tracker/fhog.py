@@ -272,8 +272,14 @@ def _block_normalisers(insensitive, cell):
 
 
 @njit(cache=True, nogil=True, fastmath=False, error_model="numpy")
-def _fhog_into(image, cell, n_orients, clip, table, out):
-    """fhog of one (H, W, C) image into `out` (H//cell, W//cell, 3n+5), which must be zeroed."""
+def _fhog_into(image, cell, n_orients, clip, table, weights, out):
+    """fhog of one (H, W, C) image, each cell's values times `weights[y, x]`, into `out`
+    (H//cell, W//cell, >= 3n+4) of any strides (a channel-first view of a transform's input
+    buffer works); channels past 3n+4 (the toolbox's zero channel) are left as they are.
+
+    A float32 product rounds once wherever it is taken, so `out` holds exactly what the
+    unweighted features times the weights would give (weights of one give the features).
+    """
     hb, wb = out.shape[0], out.shape[1]
     if hb == 0 or wb == 0:
         return
@@ -287,37 +293,48 @@ def _fhog_into(image, cell, n_orients, clip, table, out):
                 insensitive[y, x, o] = sensitive[y, x, o] + sensitive[y, x, o + n_orients]
     norm = _block_normalisers(insensitive, cell)
     texture_first = 3 * n_orients
+    zero = np.float32(0.0)
     for y in range(hb):
         for x in range(wb):
+            weight = weights[y, x]
             # The four blocks containing cell (y, x): hogChannels' GETT(0), (1), (hb1), (hb1+1).
             n0 = norm[y + 1, x + 1]
             n1 = norm[y, x + 1]
             n2 = norm[y + 1, x]
             n3 = norm[y, x]
+            e0, e1, e2, e3 = zero, zero, zero, zero  # texture sums, in the toolbox's order
             for o in range(n_bins):
                 r = sensitive[y, x, o]
                 t0 = min(r * n0, clip)
                 t1 = min(r * n1, clip)
                 t2 = min(r * n2, clip)
                 t3 = min(r * n3, clip)
-                out[y, x, o] = t0 * _HALF + t1 * _HALF + t2 * _HALF + t3 * _HALF
-                out[y, x, texture_first] += t0 * _TEXTURE_WEIGHT
-                out[y, x, texture_first + 1] += t1 * _TEXTURE_WEIGHT
-                out[y, x, texture_first + 2] += t2 * _TEXTURE_WEIGHT
-                out[y, x, texture_first + 3] += t3 * _TEXTURE_WEIGHT
+                out[y, x, o] = (t0 * _HALF + t1 * _HALF + t2 * _HALF + t3 * _HALF) * weight
+                e0 += t0 * _TEXTURE_WEIGHT
+                e1 += t1 * _TEXTURE_WEIGHT
+                e2 += t2 * _TEXTURE_WEIGHT
+                e3 += t3 * _TEXTURE_WEIGHT
             for o in range(n_orients):
                 r = insensitive[y, x, o]
                 t0 = min(r * n0, clip)
                 t1 = min(r * n1, clip)
                 t2 = min(r * n2, clip)
                 t3 = min(r * n3, clip)
-                out[y, x, n_bins + o] = t0 * _HALF + t1 * _HALF + t2 * _HALF + t3 * _HALF
+                value = t0 * _HALF + t1 * _HALF + t2 * _HALF + t3 * _HALF
+                out[y, x, n_bins + o] = value * weight
+            out[y, x, texture_first] = e0 * weight
+            out[y, x, texture_first + 1] = e1 * weight
+            out[y, x, texture_first + 2] = e2 * weight
+            out[y, x, texture_first + 3] = e3 * weight
 
 
 @njit(cache=True, nogil=True, fastmath=False, error_model="numpy")
-def _fhog_batch_into(images, cell, n_orients, clip, table, out):
+def _fhog_batch_into(images, cell, n_orients, clip, table, sample_weights, out):
+    """`_fhog_into` of each image, all of image i's values times `sample_weights[i]`."""
+    weights = np.empty((out.shape[1], out.shape[2]), np.float32)
     for i in range(images.shape[0]):
-        _fhog_into(images[i], cell, n_orients, clip, table, out[i])
+        weights[:] = sample_weights[i]
+        _fhog_into(images[i], cell, n_orients, clip, table, weights, out[i])
 
 
 def _as_kernel_input(images: np.ndarray, image_axes: int) -> np.ndarray:
@@ -366,14 +383,49 @@ def fhog(
     out = np.zeros(
         (height // cell_size, width // cell_size, fhog_channels(n_orients)), dtype=np.float32
     )
-    _fhog_into(pixels, int(cell_size), int(n_orients), np.float32(clip), acos_table(), out)
+    weights = np.ones(out.shape[:2], np.float32)
+    _fhog_into(pixels, int(cell_size), int(n_orients), np.float32(clip), acos_table(), weights, out)
     return out
 
 
+def fhog_weighted_into(
+    image: np.ndarray,
+    weights: np.ndarray,
+    out: np.ndarray,
+    cell_size: int = 4,
+    n_orients: int = 9,
+    clip: float = 0.2,
+) -> None:
+    """`fhog(image, ...)` times float32 `weights` (H//cell, W//cell), written into `out`
+    (H//cell, W//cell, 3n+4) of any strides, without the zero channel: a channel-first view of
+    a transform's input buffer takes the windowed features in the same pass, exactly the
+    values `fhog(image)[..., :3n+4] * weights[..., None]` has."""
+    _check_settings(cell_size, n_orients, clip)
+    pixels = _as_kernel_input(image, 2)
+    cells = (pixels.shape[0] // cell_size, pixels.shape[1] // cell_size)
+    if weights.shape != cells or out.shape != (*cells, fhog_channels(n_orients) - 1):
+        raise InputError(
+            f"fhog of a {pixels.shape[0]} x {pixels.shape[1]} image at cell {cell_size} needs "
+            f"weights {cells} and out {(*cells, fhog_channels(n_orients) - 1)}, got "
+            f"{weights.shape} and {out.shape}"
+        )
+    table = acos_table()
+    _fhog_into(pixels, int(cell_size), int(n_orients), np.float32(clip), table, weights, out)
+
+
 def fhog_batch(
-    images: np.ndarray, cell_size: int = 4, n_orients: int = 9, clip: float = 0.2
+    images: np.ndarray,
+    cell_size: int = 4,
+    n_orients: int = 9,
+    clip: float = 0.2,
+    sample_weights: np.ndarray | None = None,
 ) -> np.ndarray:
-    """`fhog` of each image of an (N, H, W) or (N, H, W, C) stack -> (N, H//cell, W//cell, 3n+5)."""
+    """`fhog` of each image of an (N, H, W) or (N, H, W, C) stack -> (N, H//cell, W//cell, 3n+5).
+
+    With `sample_weights` (N,) the result is (N, H//cell, W//cell, 3n+4), without the zero
+    channel, and image i's values are times `sample_weights[i]` (float32, rounded once: exactly
+    the unweighted features times the weight).
+    """
     _check_settings(cell_size, n_orients, clip)
     stack = np.asarray(images)
     if stack.ndim not in (3, 4):
@@ -382,9 +434,16 @@ def fhog_batch(
         )
     pixels = _as_kernel_input(stack, 3)
     count, height, width = pixels.shape[:3]
-    out = np.zeros(
-        (count, height // cell_size, width // cell_size, fhog_channels(n_orients)),
-        dtype=np.float32,
-    )
-    _fhog_batch_into(pixels, int(cell_size), int(n_orients), np.float32(clip), acos_table(), out)
+    channels = fhog_channels(n_orients)
+    if sample_weights is None:
+        weights = np.ones(count, np.float32)
+    else:
+        weights = np.ascontiguousarray(sample_weights, dtype=np.float32)
+        if weights.shape != (count,):
+            raise InputError(f"fhog_batch needs {count} sample weights, got {weights.shape}")
+        channels -= FHOG_TRUNCATION_CHANNELS
+    shape = (count, height // cell_size, width // cell_size, channels)
+    out = np.zeros(shape, np.float32) if sample_weights is None else np.empty(shape, np.float32)
+    table = acos_table()
+    _fhog_batch_into(pixels, int(cell_size), int(n_orients), np.float32(clip), table, weights, out)
     return out

@@ -116,7 +116,7 @@ class ScaleFilter:
             scale * self.scale_steps[indices],
             self.model_size_hw,
         )
-        return scale_features(patches) * self.window[indices, None]
+        return scale_features(patches, self.window[indices])
 
     def detect(self, image: np.ndarray, position, scale: float) -> tuple[int, float]:
         """Best scale index and the new (clamped) scale factor."""
