@@ -352,8 +352,7 @@ def feature_maps(
         np.multiply(grey_feature(array, cell)[:, :, 0], window, out=out[0])
         channel += GREY_CHANNELS
     if params.use_fhog:
-        hog = out[channel : channel + FHOG_CHANNELS].transpose(1, 2, 0)
-        fhog_weighted_into(array, window, hog, cell)
+        fhog_weighted_into(array, window, out[channel : channel + FHOG_CHANNELS], cell)
         channel += FHOG_CHANNELS
     if array.ndim == 3 and params.colour_feature != "none":
         table = colour_table if params.colour_feature == "table" else lab11_table()
