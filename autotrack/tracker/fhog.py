@@ -113,7 +113,7 @@ def _planar_float32(image):
     return planes
 
 
-@njit(cache=True, nogil=True, fastmath=False, error_model="numpy")
+@njit(cache=True, nogil=True, fastmath=False, error_model="numpy", inline="always")
 def _row_gradients(plane, y, gx, gy):
     """gradient2 on one row: centred differences, one-sided with factor 1 at the image border.
 
