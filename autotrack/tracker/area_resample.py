@@ -18,6 +18,7 @@ along either axis -- are reported by `area_path_is_generic` and left to `cv2.res
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 
 import numpy as np
 from numba import njit
@@ -282,13 +283,15 @@ def _area_crop(image, top, left, src_h, src_w, out):
             row[i] = np.uint8(min(max(value, np.float32(0.0)), np.float32(255.0)))
 
 
-def _kernel_pixels(image: np.ndarray, top, left, bottom, right):
-    """(H, W, C) C-contiguous pixels covering rows top..bottom and cols left..right (clamped),
-    and the offset of the returned array in the image. A strided frame (a view into a larger
-    array) is cut to that region before the copy, so the cost never grows with the image."""
+def _kernel_pixels(image: np.ndarray, bounds: Callable[[], tuple[int, int, int, int]]):
+    """(H, W, C) C-contiguous pixels covering the rows top..bottom and cols left..right that
+    `bounds()` gives (clamped; asked only for a strided frame), and the offset of the returned
+    array in the image. A strided frame (a view into a larger array) is cut to that region
+    before the copy, so the cost never grows with the image."""
     pixels = image if image.ndim == 3 else image.reshape(*image.shape, 1)
     if pixels.flags.c_contiguous:
         return pixels, 0, 0
+    top, left, bottom, right = bounds()
     height, width = pixels.shape[:2]
     row0 = min(max(int(top), 0), height - 1)
     col0 = min(max(int(left), 0), width - 1)
@@ -303,7 +306,7 @@ def area_resize_crop(
     """One crop of `image` (0-based top/left, border replicated) area-shrunk to `out_hw`, exactly
     as `cv2.resize(crop, INTER_AREA)`; `area_path_is_generic(size_hw, out_hw)` must hold."""
     rows, cols = int(size_hw[0]), int(size_hw[1])
-    pixels, row0, col0 = _kernel_pixels(image, top, left, top + rows, left + cols)
+    pixels, row0, col0 = _kernel_pixels(image, lambda: (top, left, top + rows, left + cols))
     out = np.empty((int(out_hw[0]), int(out_hw[1]), pixels.shape[2]), np.uint8)
     _area_crop(pixels, int(top) - row0, int(left) - col0, rows, cols, out)
     return out if image.ndim == 3 else out[..., 0]
@@ -324,7 +327,8 @@ def area_resize_crops(
     tops = np.asarray(tops, dtype=np.int64)
     lefts = np.asarray(lefts, dtype=np.int64)
     pixels, row0, col0 = _kernel_pixels(
-        image, tops.min(), lefts.min(), (tops + sizes[:, 0]).max(), (lefts + sizes[:, 1]).max()
+        image,
+        lambda: (tops.min(), lefts.min(), (tops + sizes[:, 0]).max(), (lefts + sizes[:, 1]).max()),
     )
     out = np.empty((count, int(out_hw[0]), int(out_hw[1]), pixels.shape[2]), np.uint8)
     _area_samples(
