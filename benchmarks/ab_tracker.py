@@ -4,8 +4,10 @@ The revision's `autotrack/` is extracted into a temporary folder and imported un
 name, so both versions track the same frames in the same process, one update each in
 alternating order, frame by frame: a busy machine slows both alike. Prints, per sequence, the
 CPU time (`time.process_time`) per update of each, their ratio, and whether every box and
-response map is identical (since round 7 they may differ at the rounding level: measured
-FFTW plans; the regression guard of `speed.py` bounds that).
+response map is identical (since round 7 they may differ at the rounding level: measured FFTW
+plans; the regression guard of `speed.py` bounds that). Both versions' kernels are compiled
+(or loaded) by `tracker.warmup.warm_up` before the timing: the revision's, extracted into a
+fresh folder, were otherwise compiled inside its first sequence's timed updates.
 
 python benchmarks/ab_tracker.py integration3
 python benchmarks/ab_tracker.py HEAD~1 --frames 100 --preset autotrack+
@@ -157,11 +159,9 @@ def main() -> int:
             return 2
         sys.path.insert(0, folder)
         base = importlib.import_module(BASE_PACKAGE)
-        # A few untimed updates first: each version loads (or compiles, the revision in its
-        # temporary folder) its kernels on first use, which would fall on the first sequence.
-        warm_up = SHARED / "sequences" / SEQUENCES[0][0] / SEQUENCES[0][1]
-        if warm_up.is_dir():
-            compare(base, new, warm_up, args.preset, 3, overrides)
+        for module in (base, new):  # the revision's kernels compile in its fresh folder: untimed
+            warmup = importlib.import_module(f"{module.__name__}.tracker.warmup")
+            warmup.warm_up(module.preset(args.preset, str(COLOUR_TABLE)))
         load = os.getloadavg()
         print(f"load average before: {load[0]:.1f} {load[1]:.1f} {load[2]:.1f}")
         totals = [0.0, 0.0, 0]

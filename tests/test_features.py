@@ -13,23 +13,25 @@ import scipy.io
 
 from autotrack.errors import InputError
 from autotrack.params import TrackerParams
-from autotrack.tracker.features import (
+from autotrack.tracker.colour_terms import (
     COLOUR_PROTOTYPES,
     COLOUR_TERMS,
+    colour_term_probabilities,
+    lab11_projection,
+    srgb_to_lab,
+)
+from autotrack.tracker.features import (
     RGB2GRAY_WEIGHTS,
     cell_average,
     colour_table_feature,
-    colour_term_probabilities,
     extract_features,
     feature_dim,
     grey_feature,
     is_grey,
     lab11_colour_feature,
-    lab11_projection,
     lab11_table,
     load_colour_table,
     scale_features,
-    srgb_to_lab,
 )
 from autotrack.tracker.fhog import fhog, fhog_batch
 from tests.conftest import COLOUR_TABLE, SEQUENCES

@@ -18,6 +18,7 @@ along either axis -- are reported by `area_path_is_generic` and left to `cv2.res
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 
 import numpy as np
 from numba import njit
@@ -51,18 +52,26 @@ def area_path_is_generic(src_hw: tuple[int, int], dst_hw: tuple[int, int]) -> bo
     return not fast
 
 
+@njit(cache=True, nogil=True, fastmath=False, error_model="numpy")
+def _generic_paths(sizes, dst_h, dst_w):
+    """`area_path_is_generic` of each (rows, cols) row of `sizes`, in the same float64 steps."""
+    generic = np.empty(sizes.shape[0], np.bool_)
+    for i in range(sizes.shape[0]):
+        src_h, src_w = sizes[i, 0], sizes[i, 1]
+        scale_x = 1.0 / (dst_w / src_w)
+        scale_y = 1.0 / (dst_h / src_h)
+        same = src_h == dst_h and src_w == dst_w
+        fast = abs(scale_x - np.rint(scale_x)) < _DBL_EPSILON and (
+            abs(scale_y - np.rint(scale_y)) < _DBL_EPSILON
+        )  # a fractional part of exactly 0.5 is never fast: the rounding of halves is moot
+        generic[i] = scale_x >= 1.0 and scale_y >= 1.0 and not same and not fast
+    return generic
+
+
 def area_paths_are_generic(sizes_hw: np.ndarray, dst_hw: tuple[int, int]) -> np.ndarray:
-    """`area_path_is_generic` for each row of an (N, 2) array of source sizes, vectorised."""
-    sizes = np.asarray(sizes_hw, dtype=np.int64).reshape(-1, 2)
-    dst_h, dst_w = int(dst_hw[0]), int(dst_hw[1])
-    scale_y = 1.0 / (dst_h / sizes[:, 0])
-    scale_x = 1.0 / (dst_w / sizes[:, 1])
-    same = (sizes[:, 0] == dst_h) & (sizes[:, 1] == dst_w)
-    shrinking = (scale_x >= 1.0) & (scale_y >= 1.0)
-    fast = (np.abs(scale_x - np.round(scale_x)) < _DBL_EPSILON) & (
-        np.abs(scale_y - np.round(scale_y)) < _DBL_EPSILON
-    )
-    return shrinking & ~same & ~fast
+    """`area_path_is_generic` for each row of an (N, 2) array of source sizes, in one call."""
+    sizes = np.ascontiguousarray(sizes_hw, dtype=np.int64).reshape(-1, 2)
+    return _generic_paths(sizes, int(dst_hw[0]), int(dst_hw[1]))
 
 
 @njit(cache=True, nogil=True, fastmath=False, error_model="numpy")
@@ -140,11 +149,14 @@ def _area_from_region(region, row0, col0, src_h, src_w, out):
     y_offsets = np.empty(dst_h + 1, np.int64)
     _area_taps(src_w, dst_w, x_src, x_weight, x_offsets)
     _area_taps(src_h, dst_h, y_src, y_weight, y_offsets)
-    # Horizontal pass, for every source row at once: buf = sum over x taps of S * alpha.
-    horizontal = np.empty((channels, dst_w, src_h), np.float32)
+    # Horizontal pass, for every source row at once: buf = sum over x taps of S * alpha, one
+    # output column at a time along the (contiguous) source rows, kept row-major for the
+    # vertical pass, which then runs along whole output rows (vectorised); every element
+    # still takes its taps in OpenCV's order.
+    acc = np.empty(src_h, np.float32)
+    by_row = np.empty((channels, src_h, dst_w), np.float32)
     for c in range(channels):
         for dx in range(dst_w):
-            acc = horizontal[c, dx]
             k = x_offsets[dx]
             column = region[c, col0 + x_src[k], row0 : row0 + src_h]
             alpha = x_weight[k]
@@ -155,16 +167,23 @@ def _area_from_region(region, row0, col0, src_h, src_w, out):
                 alpha = x_weight[k]
                 for r in range(src_h):
                     acc[r] = acc[r] + column[r] * alpha
+            rows = by_row[c]
+            for r in range(src_h):
+                rows[r, dx] = acc[r]
     # Vertical pass: sum over y taps of beta * buf, then saturate_cast<uchar> (half to even).
+    total = np.empty(dst_w, np.float32)
     for dy in range(dst_h):
         first, last = y_offsets[dy], y_offsets[dy + 1]
-        for dx in range(dst_w):
-            for c in range(channels):
-                values = horizontal[c, dx]
-                total = y_weight[first] * values[y_src[first]]
-                for j in range(first + 1, last):
-                    total = total + y_weight[j] * values[y_src[j]]
-                value = np.rint(total)
+        for c in range(channels):
+            source, beta = by_row[c, y_src[first]], y_weight[first]
+            for dx in range(dst_w):
+                total[dx] = beta * source[dx]
+            for j in range(first + 1, last):
+                source, beta = by_row[c, y_src[j]], y_weight[j]
+                for dx in range(dst_w):
+                    total[dx] = total[dx] + beta * source[dx]
+            for dx in range(dst_w):
+                value = np.rint(total[dx])
                 out[dy, dx, c] = np.uint8(min(max(value, np.float32(0.0)), np.float32(255.0)))
 
 
@@ -264,13 +283,15 @@ def _area_crop(image, top, left, src_h, src_w, out):
             row[i] = np.uint8(min(max(value, np.float32(0.0)), np.float32(255.0)))
 
 
-def _kernel_pixels(image: np.ndarray, top, left, bottom, right):
-    """(H, W, C) C-contiguous pixels covering rows top..bottom and cols left..right (clamped),
-    and the offset of the returned array in the image. A strided frame (a view into a larger
-    array) is cut to that region before the copy, so the cost never grows with the image."""
+def _kernel_pixels(image: np.ndarray, bounds: Callable[[], tuple[int, int, int, int]]):
+    """(H, W, C) C-contiguous pixels covering the rows top..bottom and cols left..right that
+    `bounds()` gives (clamped; asked only for a strided frame), and the offset of the returned
+    array in the image. A strided frame (a view into a larger array) is cut to that region
+    before the copy, so the cost never grows with the image."""
     pixels = image if image.ndim == 3 else image.reshape(*image.shape, 1)
     if pixels.flags.c_contiguous:
         return pixels, 0, 0
+    top, left, bottom, right = bounds()
     height, width = pixels.shape[:2]
     row0 = min(max(int(top), 0), height - 1)
     col0 = min(max(int(left), 0), width - 1)
@@ -285,7 +306,7 @@ def area_resize_crop(
     """One crop of `image` (0-based top/left, border replicated) area-shrunk to `out_hw`, exactly
     as `cv2.resize(crop, INTER_AREA)`; `area_path_is_generic(size_hw, out_hw)` must hold."""
     rows, cols = int(size_hw[0]), int(size_hw[1])
-    pixels, row0, col0 = _kernel_pixels(image, top, left, top + rows, left + cols)
+    pixels, row0, col0 = _kernel_pixels(image, lambda: (top, left, top + rows, left + cols))
     out = np.empty((int(out_hw[0]), int(out_hw[1]), pixels.shape[2]), np.uint8)
     _area_crop(pixels, int(top) - row0, int(left) - col0, rows, cols, out)
     return out if image.ndim == 3 else out[..., 0]
@@ -306,7 +327,8 @@ def area_resize_crops(
     tops = np.asarray(tops, dtype=np.int64)
     lefts = np.asarray(lefts, dtype=np.int64)
     pixels, row0, col0 = _kernel_pixels(
-        image, tops.min(), lefts.min(), (tops + sizes[:, 0]).max(), (lefts + sizes[:, 1]).max()
+        image,
+        lambda: (tops.min(), lefts.min(), (tops + sizes[:, 0]).max(), (lefts + sizes[:, 1]).max()),
     )
     out = np.empty((count, int(out_hw[0]), int(out_hw[1]), pixels.shape[2]), np.uint8)
     _area_samples(

@@ -105,12 +105,12 @@ class SpectrumTransform:
         out = pyfftw.empty_aligned(self._spectrum_shape, np.complex64)
         return self._forward(maps, out)
 
-    def forward_windowed(self, features: np.ndarray, window: np.ndarray) -> np.ndarray:
-        """Half spectra of (rows, cols, channels) feature maps times a (rows, cols) window (a new
-        complex64 array); the product is written straight into the transform's input buffer."""
-        maps = self._forward.input_array
-        np.multiply(features.transpose(2, 0, 1), window, out=maps)
-        return self.forward(maps)
+    @property
+    def input_maps(self) -> np.ndarray:
+        """The forward plan's own float32 (channels, rows, cols) input buffer: maps written here
+        (`features.feature_maps(..., out=transform.input_maps)` writes the windowed features
+        channel-first) are transformed by `forward(transform.input_maps)` without a copy."""
+        return self._forward.input_array
 
     def inverse_scratch(self, spectrum: np.ndarray) -> np.ndarray:
         """Real maps of half spectra, in a buffer the next `inverse_scratch` call overwrites."""

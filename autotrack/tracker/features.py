@@ -3,13 +3,15 @@
 Channel order follows the AutoTrack release: grey (1), fHOG (31), colour (10) for colour
 patches; grey and fHOG (32) for grey patches. Everything is float32 of shape
 (H // cell, W // cell, K); pixels past the last whole cell are dropped, as the release's
-`average_feature_region` and `fhog` do.
+`average_feature_region` and `fhog` do. The tracker's own path, `feature_maps`, writes them
+channel-first (K, H // cell, W // cell) and times its cosine window straight into the buffer
+its transform reads, each kernel in the pass that computes them.
 
 Colour features:
 - 'table': the published Color Names lookup (van de Weijer et al. 2009, normalised 10-D form of
   Danelljan et al. 2014), loaded by the user from a file; it is research data, not ours.
 - 'lab11' (default): our own soft assignment of each pixel's CIELAB colour to the 11 English
-  basic colour terms, with prototypes from the xkcd colour survey (see `COLOUR_PROTOTYPES`),
+  basic colour terms, with prototypes from the xkcd colour survey (`colour_terms`),
   projected onto the 10-D subspace orthogonal to the all-ones vector. It is built from colour
   science alone, never from the published table.
 """
@@ -20,63 +22,23 @@ from functools import lru_cache
 from pathlib import Path
 
 import numpy as np
-import scipy.linalg
 from numba import njit
 
 from autotrack.compile_cache import cached_array
 from autotrack.errors import InputError
 from autotrack.params import TrackerParams
-from autotrack.tracker.fhog import fhog, fhog_batch, fhog_channels
+from autotrack.tracker import colour_terms
+from autotrack.tracker.colour_terms import COLOUR_TABLE_ROWS, build_lab11_table
+from autotrack.tracker.fhog import fhog_batch, fhog_channels, fhog_weighted_into
 
 GREY_CHANNELS = 1
 FHOG_CHANNELS = fhog_channels(9) - 1  # the toolbox's all-zero truncation channel is dropped
 COLOUR_CHANNELS = 10
-COLOUR_TABLE_ROWS = 32 * 32 * 32
 SCALE_FEATURE_CELL = 4
 """The release's scale filter always takes fHOG at cell 4 of its resampled samples."""
 
 RGB2GRAY_WEIGHTS = np.array([0.298936021293775, 0.587043074451121, 0.114020904255103])
 """MATLAB rgb2gray's weights on R, G, B (the luma row of the inverse NTSC YIQ transform)."""
-
-COLOUR_TERMS = (
-    "black", "blue", "brown", "grey", "green", "orange", "pink", "purple", "red", "white", "yellow",
-)  # fmt: skip
-"""The 11 English basic colour terms (Berlin & Kay 1969), in the Color Names table's order."""
-
-COLOUR_PROTOTYPES: dict[str, tuple[str, ...]] = {
-    "black": ("000000",),
-    "blue": ("0343df", "95d0fc", "00035b"),
-    "brown": ("653700", "ad8150", "341c02"),
-    "grey": ("929591", "d8dcd6", "363737"),
-    "green": ("15b01a", "96f97b", "033500"),
-    "orange": ("f97306", "fdaa48", "c65102"),
-    "pink": ("ff81c0", "ffd1df", "cb416b"),
-    "purple": ("7e1e9c", "bf77f6", "35063e"),
-    "red": ("e50000", "ff474c", "840000"),
-    "white": ("ffffff",),
-    "yellow": ("ffff14", "fffe7a", "d5b60a"),
-}
-"""sRGB prototypes per term: the colours the xkcd colour survey (R. Munroe, 2010; about 200,000
-participants naming random monitor colours; results public domain) gives for the names 'T',
-'light T' and 'dark T' of each basic term T ('black' and 'white' have no variants). Several
-prototypes per term cover its lightness range, which a single focal colour does not (dark red
-would otherwise fall to brown, navy to purple)."""
-
-LAB11_SIGMA = 12.0
-"""Width (CIELAB Delta E*ab) of the Gaussian kernel on the distance to a term's nearest prototype.
-The median distance from a prototype to the nearest prototype of another term is 32; at sigma 12
-such a neighbour keeps a weight exp(-32^2 / (2 * 12^2)) ~ 0.03, so assignments are soft between
-neighbouring terms and close to one-hot at a prototype."""
-
-_D65_WHITE = np.array([0.95047, 1.0, 1.08883])
-_SRGB_TO_XYZ = np.array(
-    [
-        [0.4124564, 0.3575761, 0.1804375],
-        [0.2126729, 0.7151522, 0.0721750],
-        [0.0193339, 0.1191920, 0.9503041],
-    ]
-)  # IEC 61966-2-1 (sRGB) primaries, D65
-
 
 # -- cell averaging and the grey channel ---------------------------------------------------------
 
@@ -172,8 +134,9 @@ def grey_feature(patch: np.ndarray, cell_size: int) -> np.ndarray:
 
 
 @njit(cache=True, nogil=True, fastmath=False, error_model="numpy")
-def _lookup_cell_average(patch, table, cell, out):
-    """Cell means of table[R//8 + 32 (G//8) + 1024 (B//8)] over an RGB uint8 patch."""
+def _lookup_cell_average(patch, table, cell, weights, out):
+    """Cell means of table[R//8 + 32 (G//8) + 1024 (B//8)] over an RGB uint8 patch, each cell's
+    mean times `weights[row, col]` (rounded once after the mean), into `out` of any strides."""
     rows, cols, depth = out.shape
     width = cols * cell
     index = np.empty(width, np.int64)
@@ -196,8 +159,9 @@ def _lookup_cell_average(patch, table, cell, out):
                     for k in range(depth):
                         target[k] += source[k]
         for col in range(cols):
+            weight = weights[row, col]
             for k in range(depth):
-                out[row, col, k] = accumulator[col, k] * scale
+                out[row, col, k] = (accumulator[col, k] * scale) * weight
 
 
 def _as_rgb_uint8(patch: np.ndarray) -> np.ndarray:
@@ -212,18 +176,23 @@ def _as_rgb_uint8(patch: np.ndarray) -> np.ndarray:
     return np.ascontiguousarray(array)
 
 
-def colour_table_feature(patch_rgb_uint8: np.ndarray, table: np.ndarray, cell: int) -> np.ndarray:
-    """Cell means of a 32768-row colour table indexed by R//8 + 32*(G//8) + 1024*(B//8)."""
-    cell = _check_cell(cell)
-    rgb = _as_rgb_uint8(patch_rgb_uint8)
+def _checked_lookup(patch: np.ndarray, table: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(RGB uint8 C-contiguous patch, float32 C-contiguous table) for `_lookup_cell_average`."""
+    rgb = _as_rgb_uint8(patch)
     lookup = np.asarray(table)
     if lookup.ndim != 2 or lookup.shape[0] != COLOUR_TABLE_ROWS:
         raise InputError(
             f"a colour table must have {COLOUR_TABLE_ROWS} rows (one per RGB bin), got shape {lookup.shape}"
         )
-    lookup = np.ascontiguousarray(lookup, dtype=np.float32)
+    return rgb, np.ascontiguousarray(lookup, dtype=np.float32)
+
+
+def colour_table_feature(patch_rgb_uint8: np.ndarray, table: np.ndarray, cell: int) -> np.ndarray:
+    """Cell means of a 32768-row colour table indexed by R//8 + 32*(G//8) + 1024*(B//8)."""
+    cell = _check_cell(cell)
+    rgb, lookup = _checked_lookup(patch_rgb_uint8, table)
     out = np.empty((rgb.shape[0] // cell, rgb.shape[1] // cell, lookup.shape[1]), np.float32)
-    _lookup_cell_average(rgb, lookup, cell, out)
+    _lookup_cell_average(rgb, lookup, cell, np.ones(out.shape[:2], np.float32), out)
     return out
 
 
@@ -300,86 +269,12 @@ def _table_from_mat(file: Path) -> np.ndarray:
     )
 
 
-# -- our own colour feature: CIELAB soft assignment to the 11 basic terms -------------------------
-
-
-def srgb_to_lab(rgb: np.ndarray) -> np.ndarray:
-    """CIELAB (D65) of sRGB values on the 0..255 scale; (..., 3) -> (..., 3) float64."""
-    c = np.asarray(rgb, dtype=np.float64) / 255.0
-    linear = np.where(c <= 0.04045, c / 12.92, ((c + 0.055) / 1.055) ** 2.4)  # IEC 61966-2-1
-    xyz = linear @ _SRGB_TO_XYZ.T / _D65_WHITE
-    delta = 6.0 / 29.0
-    f = np.where(xyz > delta**3, np.cbrt(xyz), xyz / (3 * delta**2) + 4.0 / 29.0)  # CIE 15
-    return np.stack(
-        [
-            116.0 * f[..., 1] - 16.0,
-            500.0 * (f[..., 0] - f[..., 1]),
-            200.0 * (f[..., 1] - f[..., 2]),
-        ],
-        axis=-1,
-    )
-
-
-@lru_cache(maxsize=1)
-def _prototype_lab() -> tuple[np.ndarray, np.ndarray]:
-    """(index of each term's first prototype, CIELAB of the prototypes grouped by term)."""
-    first, colours = [], []
-    for term in COLOUR_TERMS:
-        first.append(len(colours))
-        colours.extend(
-            [int(code[i : i + 2], 16) for i in (0, 2, 4)] for code in COLOUR_PROTOTYPES[term]
-        )
-    return np.array(first), srgb_to_lab(np.array(colours, dtype=np.float64))
-
-
-def colour_term_probabilities(rgb: np.ndarray, sigma: float = LAB11_SIGMA) -> np.ndarray:
-    """Soft assignment of sRGB colours (..., 3), 0..255 scale, to `COLOUR_TERMS` -> (..., 11).
-
-    p_t ∝ exp(-d_t^2 / (2 sigma^2)), d_t the CIELAB distance to term t's nearest prototype.
-    """
-    first, prototypes = _prototype_lab()
-    lab = srgb_to_lab(rgb)
-    squared = (
-        (lab**2).sum(axis=-1, keepdims=True)
-        + (prototypes**2).sum(axis=-1)
-        - 2.0 * lab @ prototypes.T
-    )
-    nearest = np.minimum.reduceat(np.maximum(squared, 0.0), first, axis=-1)
-    logits = -nearest / (2.0 * sigma**2)
-    logits -= logits.max(axis=-1, keepdims=True)
-    weights = np.exp(logits)
-    return weights / weights.sum(axis=-1, keepdims=True)
-
-
-@lru_cache(maxsize=1)
-def lab11_projection() -> np.ndarray:
-    """(10, 11) orthonormal rows spanning the complement of the all-ones vector (Helmert).
-
-    The 11 probabilities sum to one, so projecting onto this basis loses nothing:
-    p = projection.T @ feature + 1/11.
-    """
-    basis = scipy.linalg.helmert(len(COLOUR_TERMS))
-    basis.flags.writeable = False
-    return basis
-
-
-def build_lab11_table() -> np.ndarray:
-    """The 'lab11' feature of every 8 x 8 x 8 RGB bin, rows indexed like the Color Names table.
-
-    Evaluated at the bin centres (8 i + 3.5); float32 (32768, 10).
-    """
-    index = np.arange(COLOUR_TABLE_ROWS)
-    centres = np.stack([index % 32, (index // 32) % 32, index // 1024], axis=-1) * 8.0 + 3.5
-    features = colour_term_probabilities(centres) @ lab11_projection().T
-    return np.ascontiguousarray(features, dtype=np.float32)
-
-
 @lru_cache(maxsize=1)
 def lab11_table() -> np.ndarray:
     """`build_lab11_table()`, read-only; kept in the user cache between processes (building it
-    takes ~50 ms of a process's start-up, loading it ~1 ms), keyed by this module's source and
+    takes ~50 ms of a process's start-up, loading it ~1 ms), keyed by `colour_terms`' source and
     numpy's version."""
-    key = f"{Path(__file__).read_bytes().hex()} numpy {np.__version__}"
+    key = f"{Path(colour_terms.__file__).read_bytes().hex()} numpy {np.__version__}"
     table = cached_array("lab11", key, build_lab11_table)
     if table.shape != (COLOUR_TABLE_ROWS, COLOUR_CHANNELS) or table.dtype != np.float32:
         table = build_lab11_table()  # a foreign file under our name
@@ -406,58 +301,87 @@ def feature_dim(params: TrackerParams, colour: bool) -> int:
     return channels
 
 
-def extract_features(
-    patch: np.ndarray, params: TrackerParams, colour_table: np.ndarray | None
-) -> np.ndarray:
-    """The release's feature stack of one patch -> float32 C-contiguous (H//c, W//c, K).
-
-    `patch` is uint8 RGB (H x W x 3) or grey (H x W); a grey patch gets no colour channels.
-    Order: grey (1), fHOG (31), colour (10), each when enabled in `params`; colour_feature
-    'table' uses `colour_table` (a 32768-row table, see `load_colour_table`).
-    """
+def _feature_patch(patch: np.ndarray, params: TrackerParams, colour_table) -> np.ndarray:
+    """The patch as H x W (grey) or H x W x 3, checked against the enabled features."""
     array = np.asarray(patch)
     if array.ndim == 3 and array.shape[2] == 1:
         array = array[:, :, 0]
     if array.ndim not in (2, 3) or (array.ndim == 3 and array.shape[2] != 3):
         raise InputError(f"a feature patch must be H x W or H x W x 3, got shape {np.shape(patch)}")
-    colour = array.ndim == 3
-    cell = _check_cell(params.cell_size)
-    if colour and params.colour_feature == "table" and colour_table is None:
+    _check_cell(params.cell_size)
+    if array.ndim == 3 and params.colour_feature == "table" and colour_table is None:
         raise InputError(
             "colour_feature='table' needs the Color Names table: load it with load_colour_table"
         )
-    depth = feature_dim(params, colour)
-    if depth == 0:
+    if feature_dim(params, array.ndim == 3) == 0:
         raise InputError("no feature enabled: set use_grey, use_fhog or a colour feature")
-    rows, cols = array.shape[0] // cell, array.shape[1] // cell
-    out = np.empty((rows, cols, depth), dtype=np.float32)
+    return array
+
+
+def feature_maps(
+    patch: np.ndarray,
+    params: TrackerParams,
+    colour_table: np.ndarray | None,
+    window: np.ndarray | None = None,
+    out: np.ndarray | None = None,
+) -> np.ndarray:
+    """The release's feature stack of one patch, channel-first: float32 (K, H//c, W//c).
+
+    `patch` is uint8 RGB (H x W x 3) or grey (H x W); a grey patch gets no colour channels.
+    Order: grey (1), fHOG (31), colour (10), each when enabled in `params`; colour_feature
+    'table' uses `colour_table` (a 32768-row table, see `load_colour_table`). With a float32
+    `window` (H//c, W//c) every map is times the window, taken in the pass that computes it (a
+    float32 product rounds once wherever it is taken, so these are exactly the maps times the
+    window). Written into `out` (e.g. a transform's input buffer) when given; returned.
+    """
+    array = _feature_patch(patch, params, colour_table)
+    cell = int(params.cell_size)
+    shape = (feature_dim(params, array.ndim == 3), array.shape[0] // cell, array.shape[1] // cell)
+    if window is None:
+        window = np.ones(shape[1:], np.float32)
+    if window.shape != shape[1:] or window.dtype != np.float32:
+        raise InputError(
+            f"the window must be float32 {shape[1:]}, got {window.dtype} {window.shape}"
+        )
+    if out is None:
+        out = np.empty(shape, np.float32)
+    elif out.shape != shape or out.dtype != np.float32:
+        raise InputError(f"feature maps need a float32 {shape} buffer, got {out.dtype} {out.shape}")
     channel = 0
     if params.use_grey:
-        out[:, :, channel : channel + GREY_CHANNELS] = grey_feature(array, cell)
+        np.multiply(grey_feature(array, cell)[:, :, 0], window, out=out[0])
         channel += GREY_CHANNELS
     if params.use_fhog:
-        hog = fhog(array, cell)
-        out[:, :, channel : channel + FHOG_CHANNELS] = hog[:, :, :FHOG_CHANNELS]
+        fhog_weighted_into(array, window, out[channel : channel + FHOG_CHANNELS], cell)
         channel += FHOG_CHANNELS
-    if colour and params.colour_feature != "none":
-        if params.colour_feature == "table":
-            out[:, :, channel:] = colour_table_feature(array, colour_table, cell)
-        else:
-            out[:, :, channel:] = lab11_colour_feature(array, cell)
+    if array.ndim == 3 and params.colour_feature != "none":
+        table = colour_table if params.colour_feature == "table" else lab11_table()
+        rgb, lookup = _checked_lookup(array, table)
+        _lookup_cell_average(rgb, lookup, cell, window, out[channel:].transpose(1, 2, 0))
     return out
 
 
-def scale_features(patches: np.ndarray) -> np.ndarray:
+def extract_features(
+    patch: np.ndarray, params: TrackerParams, colour_table: np.ndarray | None
+) -> np.ndarray:
+    """`feature_maps` channel-last: float32 C-contiguous (H//c, W//c, K)."""
+    return np.ascontiguousarray(feature_maps(patch, params, colour_table).transpose(1, 2, 0))
+
+
+def scale_features(patches: np.ndarray, weights: np.ndarray | None = None) -> np.ndarray:
     """Scale-filter samples: fHOG (cell 4, 31 channels) of each patch, flattened -> (N, D).
 
     `patches` is (N, h, w) or (N, h, w, 3). Each patch's (h//4, w//4, 31) block is flattened in
     C order (the release uses MATLAB's column-major order; the scale filter only needs one fixed
-    order).
+    order). With float32 `weights` (N,) sample i is times weights[i] (the scale window), taken in
+    the pass that computes it: exactly the unweighted samples times the weights.
     """
     stack = np.asarray(patches)
     if stack.ndim not in (3, 4):
         raise InputError(
             f"scale samples must be N x h x w or N x h x w x 3, got shape {stack.shape}"
         )
-    hog = fhog_batch(stack, SCALE_FEATURE_CELL)[..., :FHOG_CHANNELS]
-    return np.ascontiguousarray(hog.reshape(stack.shape[0], -1))
+    if weights is None:
+        weights = np.ones(stack.shape[0], np.float32)
+    hog = fhog_batch(stack, SCALE_FEATURE_CELL, sample_weights=weights)
+    return hog.reshape(stack.shape[0], -1)

@@ -113,7 +113,7 @@ def _planar_float32(image):
     return planes
 
 
-@njit(cache=True, nogil=True, fastmath=False, error_model="numpy")
+@njit(cache=True, nogil=True, fastmath=False, error_model="numpy", inline="always")
 def _row_gradients(plane, y, gx, gy):
     """gradient2 on one row: centred differences, one-sided with factor 1 at the image border.
 
@@ -271,10 +271,41 @@ def _block_normalisers(insensitive, cell):
     return norm
 
 
+@njit(cache=True, nogil=True, fastmath=False, error_model="numpy", inline="always")
+def _normalised_row(by_channel, o, norm, y, clip, weights, out, sums, texture):
+    """Cell row y of orientation channel o (hogChannels): the mean of each cell's value under
+    its four block normalisers, each clipped, times `weights`, into `out[o, y]`; with
+    `texture`, the clipped values times the texture weight are added to `sums` (4, cols).
+    Inlined, with plain indexing and no array views: a call or a view per row costs reference
+    counting, which on the scale filter's 6 x 4-cell samples was most of the time."""
+    for x in range(by_channel.shape[1]):
+        r = by_channel[o, x]
+        # The four blocks containing cell (y, x): hogChannels' GETT(0), (1), (hb1), (hb1+1).
+        t0 = min(r * norm[y + 1, x + 1], clip)
+        t1 = min(r * norm[y, x + 1], clip)
+        t2 = min(r * norm[y + 1, x], clip)
+        t3 = min(r * norm[y, x], clip)
+        out[o, y, x] = (t0 * _HALF + t1 * _HALF + t2 * _HALF + t3 * _HALF) * weights[y, x]
+        if texture:
+            sums[0, x] += t0 * _TEXTURE_WEIGHT
+            sums[1, x] += t1 * _TEXTURE_WEIGHT
+            sums[2, x] += t2 * _TEXTURE_WEIGHT
+            sums[3, x] += t3 * _TEXTURE_WEIGHT
+
+
 @njit(cache=True, nogil=True, fastmath=False, error_model="numpy")
-def _fhog_into(image, cell, n_orients, clip, table, out):
-    """fhog of one (H, W, C) image into `out` (H//cell, W//cell, 3n+5), which must be zeroed."""
-    hb, wb = out.shape[0], out.shape[1]
+def _fhog_into(image, cell, n_orients, clip, table, weights, out):
+    """fhog of one (H, W, C) image, each cell's values times `weights[y, x]`, into `out`
+    (>= 3n+4, H//cell, W//cell), channel-first, any strides (a channel-first slice of a
+    transform's input buffer, or a transposed view of a channel-last array); channels past
+    3n+4 (the toolbox's zero channel) are left as they are.
+
+    A float32 product rounds once wherever it is taken, so `out` holds exactly what the
+    unweighted features times the weights would give (weights of one give the features). The
+    normalisation runs along whole cell rows, one channel at a time, each texture sum still
+    taken over the orientations in the toolbox's order.
+    """
+    hb, wb = out.shape[1], out.shape[2]
     if hb == 0 or wb == 0:
         return
     n_bins = 2 * n_orients
@@ -287,37 +318,39 @@ def _fhog_into(image, cell, n_orients, clip, table, out):
                 insensitive[y, x, o] = sensitive[y, x, o] + sensitive[y, x, o + n_orients]
     norm = _block_normalisers(insensitive, cell)
     texture_first = 3 * n_orients
+    by_channel = np.empty((n_bins + n_orients, wb), np.float32)  # one cell row, channel-major
+    sums = np.empty((4, wb), np.float32)
     for y in range(hb):
         for x in range(wb):
-            # The four blocks containing cell (y, x): hogChannels' GETT(0), (1), (hb1), (hb1+1).
-            n0 = norm[y + 1, x + 1]
-            n1 = norm[y, x + 1]
-            n2 = norm[y + 1, x]
-            n3 = norm[y, x]
             for o in range(n_bins):
-                r = sensitive[y, x, o]
-                t0 = min(r * n0, clip)
-                t1 = min(r * n1, clip)
-                t2 = min(r * n2, clip)
-                t3 = min(r * n3, clip)
-                out[y, x, o] = t0 * _HALF + t1 * _HALF + t2 * _HALF + t3 * _HALF
-                out[y, x, texture_first] += t0 * _TEXTURE_WEIGHT
-                out[y, x, texture_first + 1] += t1 * _TEXTURE_WEIGHT
-                out[y, x, texture_first + 2] += t2 * _TEXTURE_WEIGHT
-                out[y, x, texture_first + 3] += t3 * _TEXTURE_WEIGHT
+                by_channel[o, x] = sensitive[y, x, o]
             for o in range(n_orients):
-                r = insensitive[y, x, o]
-                t0 = min(r * n0, clip)
-                t1 = min(r * n1, clip)
-                t2 = min(r * n2, clip)
-                t3 = min(r * n3, clip)
-                out[y, x, n_bins + o] = t0 * _HALF + t1 * _HALF + t2 * _HALF + t3 * _HALF
+                by_channel[n_bins + o, x] = insensitive[y, x, o]
+        for k in range(4):
+            for x in range(wb):
+                sums[k, x] = 0.0
+        for o in range(n_bins + n_orients):
+            _normalised_row(by_channel, o, norm, y, clip, weights, out, sums, o < n_bins)
+        for k in range(4):
+            for x in range(wb):
+                out[texture_first + k, y, x] = sums[k, x] * weights[y, x]
 
 
 @njit(cache=True, nogil=True, fastmath=False, error_model="numpy")
-def _fhog_batch_into(images, cell, n_orients, clip, table, out):
-    for i in range(images.shape[0]):
-        _fhog_into(images[i], cell, n_orients, clip, table, out[i])
+def _fhog_batch_into(images, cell, n_orients, clip, table, sample_weights, out):
+    """`_fhog_into` of each image into `out` (N, H//cell, W//cell, C), channel-last, all of
+    image i's values times `sample_weights[i]` (channels `_fhog_into` leaves stay zero)."""
+    count, rows, cols, channels = out.shape
+    weights = np.empty((rows, cols), np.float32)
+    channel_first = np.zeros((channels, rows, cols), np.float32)
+    for i in range(count):
+        weights[:] = sample_weights[i]
+        _fhog_into(images[i], cell, n_orients, clip, table, weights, channel_first)
+        target = out[i]
+        for y in range(rows):
+            for x in range(cols):
+                for c in range(channels):
+                    target[y, x, c] = channel_first[c, y, x]
 
 
 def _as_kernel_input(images: np.ndarray, image_axes: int) -> np.ndarray:
@@ -366,14 +399,58 @@ def fhog(
     out = np.zeros(
         (height // cell_size, width // cell_size, fhog_channels(n_orients)), dtype=np.float32
     )
-    _fhog_into(pixels, int(cell_size), int(n_orients), np.float32(clip), acos_table(), out)
+    weights = np.ones(out.shape[:2], np.float32)
+    table = acos_table()
+    _fhog_into(
+        pixels,
+        int(cell_size),
+        int(n_orients),
+        np.float32(clip),
+        table,
+        weights,
+        out.transpose(2, 0, 1),
+    )
     return out
 
 
+def fhog_weighted_into(
+    image: np.ndarray,
+    weights: np.ndarray,
+    out: np.ndarray,
+    cell_size: int = 4,
+    n_orients: int = 9,
+    clip: float = 0.2,
+) -> None:
+    """`fhog(image, ...)` times float32 `weights` (H//cell, W//cell), written channel-first into
+    `out` (3n+4, H//cell, W//cell), any strides, without the zero channel: a slice of a
+    transform's input buffer takes the windowed features in the same pass, exactly the values
+    `fhog(image)[..., :3n+4].transpose(2, 0, 1) * weights` has."""
+    _check_settings(cell_size, n_orients, clip)
+    pixels = _as_kernel_input(image, 2)
+    cells = (pixels.shape[0] // cell_size, pixels.shape[1] // cell_size)
+    shape = (fhog_channels(n_orients) - 1, *cells)
+    if weights.shape != cells or out.shape != shape:
+        raise InputError(
+            f"fhog of a {pixels.shape[0]} x {pixels.shape[1]} image at cell {cell_size} needs "
+            f"weights {cells} and out {shape}, got {weights.shape} and {out.shape}"
+        )
+    table = acos_table()
+    _fhog_into(pixels, int(cell_size), int(n_orients), np.float32(clip), table, weights, out)
+
+
 def fhog_batch(
-    images: np.ndarray, cell_size: int = 4, n_orients: int = 9, clip: float = 0.2
+    images: np.ndarray,
+    cell_size: int = 4,
+    n_orients: int = 9,
+    clip: float = 0.2,
+    sample_weights: np.ndarray | None = None,
 ) -> np.ndarray:
-    """`fhog` of each image of an (N, H, W) or (N, H, W, C) stack -> (N, H//cell, W//cell, 3n+5)."""
+    """`fhog` of each image of an (N, H, W) or (N, H, W, C) stack -> (N, H//cell, W//cell, 3n+5).
+
+    With `sample_weights` (N,) the result is (N, H//cell, W//cell, 3n+4), without the zero
+    channel, and image i's values are times `sample_weights[i]` (float32, rounded once: exactly
+    the unweighted features times the weight).
+    """
     _check_settings(cell_size, n_orients, clip)
     stack = np.asarray(images)
     if stack.ndim not in (3, 4):
@@ -382,9 +459,15 @@ def fhog_batch(
         )
     pixels = _as_kernel_input(stack, 3)
     count, height, width = pixels.shape[:3]
-    out = np.zeros(
-        (count, height // cell_size, width // cell_size, fhog_channels(n_orients)),
-        dtype=np.float32,
-    )
-    _fhog_batch_into(pixels, int(cell_size), int(n_orients), np.float32(clip), acos_table(), out)
+    channels = fhog_channels(n_orients)
+    if sample_weights is None:
+        weights = np.ones(count, np.float32)
+    else:
+        weights = np.ascontiguousarray(sample_weights, dtype=np.float32)
+        if weights.shape != (count,):
+            raise InputError(f"fhog_batch needs {count} sample weights, got {weights.shape}")
+        channels -= FHOG_TRUNCATION_CHANNELS
+    out = np.empty((count, height // cell_size, width // cell_size, channels), np.float32)
+    table = acos_table()
+    _fhog_batch_into(pixels, int(cell_size), int(n_orients), np.float32(clip), table, weights, out)
     return out

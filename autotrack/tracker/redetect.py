@@ -19,7 +19,7 @@ import scipy.fft
 
 from autotrack.params import TrackerParams
 from autotrack.tracker import dcf
-from autotrack.tracker.features import extract_features
+from autotrack.tracker.features import feature_maps
 from autotrack.tracker.sampling import search_patch
 
 
@@ -76,7 +76,7 @@ def wide_search_offset(
     side_px = cells * cell
     region = int(dcf.matlab_round(side_px * scale))
     patch = search_patch(image, position, (region, region), (side_px, side_px))
-    maps = np.ascontiguousarray(extract_features(patch, params, colour_table).transpose(2, 0, 1))
+    maps = feature_maps(patch, params, colour_table)
     response = placement_response(filter_support(filter_f, grid_size, cos_window), maps)
     best = int(np.argmax(response))
     row, col = divmod(best, response.shape[1])

@@ -101,6 +101,7 @@ class ScaleFilter:
             math.log(float(np.min(np.asarray(image_size_hw) / self.base_target_size_hw)))
             / math.log(step)
         )
+        self._all_indices = np.arange(n)
         self._numerator: np.ndarray | None = None
         self._denominator: np.ndarray | None = None
         self._samples: np.ndarray | None = None
@@ -116,12 +117,11 @@ class ScaleFilter:
             scale * self.scale_steps[indices],
             self.model_size_hw,
         )
-        return scale_features(patches) * self.window[indices, None]
+        return scale_features(patches, self.window[indices])
 
     def detect(self, image: np.ndarray, position, scale: float) -> tuple[int, float]:
         """Best scale index and the new (clamped) scale factor."""
-        all_indices = np.arange(self.params.num_scales)
-        self._samples = self._extract(image, position, scale, all_indices)
+        self._samples = self._extract(image, position, scale, self._all_indices)
         samples_f = scipy.fft.fft(self._samples, axis=0, workers=1)
         self._samples_f = samples_f
         response_f = np.empty(samples_f.shape[0], np.complex64)
@@ -154,7 +154,7 @@ class ScaleFilter:
     def update(self, image: np.ndarray, position, scale: float, best: int | None) -> None:
         """Learn from samples at `position`/`scale` (first frame: fresh; later: shifted reuse)."""
         if best is None or self._samples is None:
-            samples = self._extract(image, position, scale, np.arange(self.params.num_scales))
+            samples = self._extract(image, position, scale, self._all_indices)
         else:
             samples = self._shifted_samples(image, position, scale, best)
         if samples is self._samples and self._samples_f is not None:

@@ -18,7 +18,7 @@ from autotrack.params import TrackerParams
 from autotrack.result import TrackResult
 from autotrack.tracker import dcf, memory, motion, redetect, regularization, robust, rotation
 from autotrack.tracker.aspect import AspectFilter
-from autotrack.tracker.features import extract_features, feature_dim, is_grey, load_colour_table
+from autotrack.tracker.features import feature_dim, feature_maps, is_grey, load_colour_table
 from autotrack.tracker.inputs import as_image, validate_box
 from autotrack.tracker.kernel_loading import load_package_without_refresh
 from autotrack.tracker.scale import ScaleFilter
@@ -374,8 +374,9 @@ class AutoTrack:
 
     def _spectrum(self, patch: np.ndarray) -> np.ndarray:
         """The windowed feature spectrum of a search patch."""
-        features = extract_features(patch, self.params, self.colour_table)
-        return self.transform.forward_windowed(features, self.cos_window)
+        maps = self.transform.input_maps
+        feature_maps(patch, self.params, self.colour_table, self.cos_window, out=maps)
+        return self.transform.forward(maps)
 
     def _features_spectrum(self, image: np.ndarray) -> np.ndarray:
         return self._spectrum(self._sampler(image).patch(self.angle))
