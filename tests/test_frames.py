@@ -2,8 +2,6 @@
 
 from __future__ import annotations
 
-import os
-import sys
 import threading
 from pathlib import Path
 
@@ -12,13 +10,7 @@ import numpy as np
 import pytest
 
 from autotrack.errors import InputError
-from autotrack.io.frames import (
-    PREFETCH_NICENESS,
-    FrameCache,
-    ImageSequence,
-    VideoFrames,
-    open_frames,
-)
+from autotrack.io.frames import FrameCache, ImageSequence, VideoFrames, open_frames
 from tests.conftest import shared_sequence_dir
 
 
@@ -207,12 +199,9 @@ class _ThreadRecordingSequence(ImageSequence):
     def __init__(self, paths, name):
         super().__init__(paths, name)
         self.readers: dict[int, str] = {}
-        self.niceness: dict[int, int] = {}
 
     def read(self, index):
         self.readers[index] = threading.current_thread().name
-        if sys.platform.startswith("linux"):
-            self.niceness[index] = os.getpriority(os.PRIO_PROCESS, threading.get_native_id())
         return super().read(index)
 
 
@@ -230,21 +219,6 @@ def test_frame_cache_reads_the_next_image_ahead_in_order(tmp_path):
     assert all(source.readers[k].startswith("prefetch-") for k in range(2, 7))
     np.testing.assert_array_equal(cache.read(0), cv2.cvtColor(written[0], cv2.COLOR_BGR2RGB))
     assert source.readers[0] == main  # the jump back: no longer cached, read here
-
-
-@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="per-thread niceness is Linux's")
-def test_frames_are_read_ahead_at_the_lowest_priority_and_the_caller_keeps_its_own(tmp_path):
-    """The read-ahead thread must not take a busy core from the trackers (docs/benchmarks.md,
-    Speed): it runs at niceness 19; the caller's thread and the process keep theirs."""
-    _write_frames(tmp_path / "seq", 5)
-    source = _ThreadRecordingSequence(sorted((tmp_path / "seq").glob("*.png")), "seq")
-    own = os.getpriority(os.PRIO_PROCESS, threading.get_native_id())
-    cache = FrameCache(source, size=3)
-    for index in range(4):
-        cache.read(index)
-    assert source.niceness[0] == source.niceness[1] == own
-    assert source.niceness[2] == source.niceness[3] == PREFETCH_NICENESS == 19
-    assert os.getpriority(os.PRIO_PROCESS, threading.get_native_id()) == own
 
 
 def test_frame_cache_reports_a_corrupt_frame_read_ahead_as_the_source_does(tmp_path):

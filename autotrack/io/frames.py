@@ -10,9 +10,7 @@ backward steps, and a longer backward jump re-opens the video and decodes from t
 
 from __future__ import annotations
 
-import contextlib
 import os
-import sys
 import threading
 from abc import ABC, abstractmethod
 from collections import OrderedDict
@@ -306,26 +304,6 @@ def open_frames(path: str | Path) -> FrameSource:
     return VideoFrames(path)
 
 
-PREFETCH_NICENESS = 19
-"""Scheduling niceness of the read-ahead thread (Linux): the lowest priority."""
-
-
-def _yield_to_tracking() -> None:
-    """Give the calling thread the lowest CPU priority, where the system allows it per thread.
-
-    The next frame is decoded while the trackers of this frame run. With every core busy
-    (the targets spread over processes) a read-ahead thread of equal priority takes its ~3 ms
-    from the tracking thread it shares a core with, which then holds up the whole frame; at the
-    lowest priority it runs in the time a core would idle (a child done with its targets, this
-    thread waiting for it). Linux sets niceness per thread (`setpriority` on the thread id);
-    elsewhere, or if refused, the thread keeps its priority.
-    """
-    if not sys.platform.startswith("linux"):
-        return
-    with contextlib.suppress(OSError, AttributeError):
-        os.setpriority(os.PRIO_PROCESS, threading.get_native_id(), PREFETCH_NICENESS)
-
-
 class _Prefetch:
     """One frame read on a background thread: OpenCV releases the GIL while it decodes and
     converts, so the frame is ready when the trackers of the frame before are done."""
@@ -339,7 +317,6 @@ class _Prefetch:
         self._thread.start()
 
     def _read(self, frames: FrameSource) -> None:
-        _yield_to_tracking()
         try:
             self._image = frames.read(self.index)
         except Exception:  # noqa: BLE001 - the caller reads it again and reports the error then
