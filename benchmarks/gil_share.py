@@ -34,7 +34,7 @@ RELEASING = (
     "_fhog_batch_into",
     "_lookup_cell_average",
     "_cell_means",
-    "training_input",
+    "channel_energy",
     "scaled_sum",
     "apply_gain",
     "update_multiplier",

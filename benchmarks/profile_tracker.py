@@ -30,7 +30,8 @@ STEPS = (
     (tracker.dcf, "newton_peak", "Newton sub-cell peak"),
     (tracker.AutoTrack, "_regularize", "variations, eta, ASR (eqs. 2-4)"),
     (scale.ScaleFilter, "detect", "scale filter: detect"),
-    (tracker.AutoTrack, "_train", "ADMM training (eqs. 8-15), the shift of the features"),
+    (tracker.dcf, "shift_spectrum", "shift of the features"),
+    (tracker.AutoTrack, "_train", "ADMM training (eqs. 8-15)"),
     (scale.ScaleFilter, "update", "scale filter: update"),
 )
 """(owner, attribute, label) of the steps of `AutoTrack.update` timed by `step_times`."""

@@ -39,6 +39,10 @@ SEQUENCES = [("DTB70", "Surfing06"), ("UAV123_10fps", "boat5"), ("OTB", "Crossin
 @pytest.mark.parametrize(("dataset", "name"), SEQUENCES)
 def test_admm_kernels_equal_numpy_bit_for_bit(monkeypatch, dataset, name):
     for xf, g_prev, _, _ in _training_inputs(monkeypatch, dataset, name):
+        energy = np.empty(xf.shape[1:], np.float32)
+        admm_kernels.channel_energy(xf, energy)
+        np.testing.assert_array_equal(energy, np.sum(xf.real**2 + xf.imag**2, axis=0))
+
         multiplier = (xf - g_prev) * np.float32(0.37)
         for gamma in (1.0, 10.0, 0.7312):
             expected = np.float32(gamma) * (g_prev + multiplier)
@@ -90,43 +94,14 @@ def test_training_with_kept_buffers_equals_fresh_buffers_bit_for_bit(monkeypatch
     trainings = _training_inputs(monkeypatch, dataset, name, frames=8)
     yf = dcf.to_spectrum(dcf.gaussian_label(trainings[0][3].grid_size, 2.1).astype(np.float32))
     for xf, g_prev, window, transform in trainings:
-        for theta_ref, shift in ((0.0, None), (13.0, None), (13.0, (0.0, 0.0)), (5.0, (1.3, -2.6))):
+        for theta_ref in (0.0, 13.0, 5.0):
             rule = regularization.theta_update("release", theta_ref, g_prev, transform.grid_size)
-            moved = xf if shift is None else dcf.shift_spectrum(xf, *shift, transform.grid_size)
             expected = _train_filter_before_the_workspace(
-                moved, yf, g_prev, window, 13.0, settings, transform, rule
+                xf, yf, g_prev, window, 13.0, settings, transform, rule
             )
-            args = (xf, yf, g_prev, window, 13.0, settings, transform, rule, shift)
-            got = dcf.train_filter(*args)
+            got = dcf.train_filter(xf, yf, g_prev, window, 13.0, settings, transform, rule)
             np.testing.assert_array_equal(got[0].view(np.uint64), expected[0].view(np.uint64))
             assert got[1] == expected[1]
-
-
-@needs_colour_table
-@pytest.mark.parametrize(("dataset", "name"), SEQUENCES)
-def test_training_input_equals_numpy_shift_and_sums_bit_for_bit(monkeypatch, dataset, name):
-    """One pass gives numpy's shifted features (`xf * phase`), sum_k |x_k|^2 and
-    `np.sum(np.conj(xf) * g_prev, axis=0)` exactly: numpy's complex products, fused or not as
-    this machine's numpy computes them."""
-    rng = np.random.default_rng(8)
-    fused = admm_kernels.NUMPY_FUSES_COMPLEX_PRODUCTS
-    for zf, g_prev, _, transform in _training_inputs(monkeypatch, dataset, name):
-        grid = transform.grid_size
-        for shift in (None, (0.0, 0.0), tuple(rng.uniform(-4.0, 4.0, 2))):
-            moved = zf if shift is None else dcf.shift_spectrum(zf, *shift, grid)
-            phase = np.ones((1, 1), np.complex64)
-            if shift is not None:
-                phase = dcf.shift_phase(*shift, grid, zf.shape[-1])
-            xf = np.full_like(zf, np.nan)
-            energy = np.full(zf.shape[1:], np.nan, np.float32)
-            s_gx = np.full(zf.shape[1:], np.nan, np.complex64)
-            args = (zf, phase, shift is not None, g_prev, fused, xf, energy, s_gx)
-            admm_kernels.training_input(*args)
-            np.testing.assert_array_equal(xf.view(np.uint64), moved.view(np.uint64))
-            expected_energy = np.sum(moved.real**2 + moved.imag**2, axis=0)
-            np.testing.assert_array_equal(energy.view(np.uint32), expected_energy.view(np.uint32))
-            expected_s_gx = np.sum(np.conj(moved) * g_prev, axis=0)
-            np.testing.assert_array_equal(s_gx.view(np.uint64), expected_s_gx.view(np.uint64))
 
 
 @needs_colour_table

@@ -294,27 +294,18 @@ def train_filter(
     settings: AdmmSettings,
     transform: SpectrumTransform,
     theta_of_filter=None,
-    shift: tuple[float, float] | None = None,
 ) -> tuple[np.ndarray, float]:
     """ADMM on the AutoTrack objective (eqs. 5-15); returns the filter and the last theta used.
 
     `theta_of_filter(g_f, iteration)` re-estimates theta after the g/h steps of an iteration
-    (eq. 13); it returns None to keep theta unchanged. `shift` (rows, cols) in cells trains on
-    `xf` moved as `shift_spectrum` moves it (the release's reuse of the detection features).
+    (eq. 13); it returns None to keep theta unchanged.
     """
     num_cells = transform.grid_size[0] * transform.grid_size[1]
     work = transform.workspace()
     g_f = h_f = l_f = work.zeros  # h and the multiplier start at 0; g is set first
-    phase = (
-        admm_kernels.NO_PHASE
-        if shift is None
-        else shift_phase(*shift, transform.grid_size, xf.shape[-1])
-    )
-    s_xx, s_gx_prev = work.s_xx, work.s_gx_prev
-    fused = admm_kernels.NUMPY_FUSES_COMPLEX_PRODUCTS
-    args = (xf, phase, shift is not None, g_prev, fused, work.features, s_xx, s_gx_prev)
-    admm_kernels.training_input(*args)
-    xf = work.features
+    s_xx = work.s_xx
+    admm_kernels.channel_energy(xf, s_xx)
+    s_gx_prev = np.sum(np.conj(xf) * g_prev, axis=0)
     gamma = float(settings.gamma_init)
     theta = float(theta_start)
     for iteration in range(1, settings.iterations + 1):
@@ -475,18 +466,10 @@ def shift_spectrum(
     """Translate feature maps by (shift_rows, shift_cols) cells in the Fourier domain.
 
     Used to train on the detection features moved to the new target position instead of
-    extracting a new patch (release behaviour; `train_filter(shift=...)` does it in its first
-    pass).
+    extracting a new patch (release behaviour).
     """
-    return xf * shift_phase(shift_rows, shift_cols, grid_size, xf.shape[-1])
-
-
-def shift_phase(
-    shift_rows: float, shift_cols: float, grid_size: tuple[int, int], half_cols: int
-) -> np.ndarray:
-    """The (rows, half_cols) complex64 phase ramp that moves a half spectrum by the shift."""
     ky = centred_frequencies(grid_size[0])
-    kx = np.arange(half_cols, dtype=np.float64)
+    kx = np.arange(xf.shape[-1], dtype=np.float64)
     phase_rows = np.exp(1j * (2.0 * np.pi * shift_rows / grid_size[0]) * ky).astype(np.complex64)
     phase_cols = np.exp(1j * (2.0 * np.pi * shift_cols / grid_size[1]) * kx).astype(np.complex64)
-    return phase_rows[:, None] * phase_cols[None, :]
+    return xf * (phase_rows[:, None] * phase_cols[None, :])

@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable
-from functools import lru_cache
 
 import numpy as np
 import scipy.linalg
@@ -117,27 +116,8 @@ def global_variation(variation: np.ndarray) -> float:
     """
     if not np.all(np.isfinite(variation)):
         return float("inf")
-    matrix = variation.astype(np.float64)
-    gesdd, lwork = _singular_value_routine(matrix.shape)
-    # scipy.linalg.svdvals(matrix, check_finite=False) without its checks: the same LAPACK
-    # routine with the same work size, so the same values
-    _, singular_values, _, info = gesdd(matrix, compute_uv=0, lwork=lwork, full_matrices=1)
-    if info != 0:
-        singular_values = scipy.linalg.svdvals(matrix, check_finite=False)  # its error
+    singular_values = scipy.linalg.svdvals(variation.astype(np.float64), check_finite=False)
     return float(singular_values[0]) * GLOBAL_VARIATION_SCALE
-
-
-@lru_cache(maxsize=8)
-def _singular_value_routine(shape: tuple[int, int]):
-    """(LAPACK gesdd, work size) as scipy.linalg.svdvals picks them for float64 `shape`."""
-    matrix = np.zeros(shape, np.float64)
-    funcs = scipy.linalg.lapack.get_lapack_funcs(
-        ("gesdd", "gesdd_lwork"), (matrix,), ilp64="preferred"
-    )
-    lwork = scipy.linalg.lapack._compute_lwork(
-        funcs[1], shape[0], shape[1], compute_uv=False, full_matrices=True
-    )
-    return funcs[0], lwork
 
 
 def temporal_reference(eta: float, zeta: float, nu: float) -> float:

@@ -193,9 +193,9 @@ class AutoTrack:
         theta = float("nan")
         if not aberrant and confident:
             cells = rotation.rotate_offset(translation, -self.angle) / (p.cell_size * self.scale)
+            xf = dcf.shift_spectrum(zf, cells[0], cells[1], self.grid_size)
             theta_start = p.zeta if p.adaptive_temporal else p.fixed_theta
-            shift = (float(cells[0]), float(cells[1]))
-            self.filter_f, theta = self._train(zf, theta_start, theta_ref, shift)
+            self.filter_f, theta = self._train(xf, theta_start, theta_ref)
             if self.memory is not None and not ambiguous:
                 self.memory.learn(self.filter_f)
         if confident:
@@ -393,14 +393,9 @@ class AutoTrack:
         return regularization.theta_update(p.theta_update, theta_ref, filter_prev, self.grid_size)
 
     def _train(
-        self,
-        xf: np.ndarray,
-        theta_start: float,
-        theta_ref: float,
-        shift: tuple[float, float] | None = None,
+        self, xf: np.ndarray, theta_start: float, theta_ref: float
     ) -> tuple[np.ndarray, float]:
-        """Filter for this frame by ADMM (eqs. 8-15), warm-started from the previous one, on
-        the features `xf` moved by `shift` cells (dcf.shift_spectrum) when given."""
+        """Filter for this frame by ADMM (eqs. 8-15), warm-started from the previous one."""
         update = self._theta_update(theta_ref, self.filter_f)
         return dcf.train_filter(
             xf,
@@ -411,7 +406,6 @@ class AutoTrack:
             self.admm,
             self.transform,
             update,
-            shift,
         )
 
     def _predicted_position(self) -> np.ndarray:
