@@ -12,7 +12,9 @@ Prints
    (the targets shared between two workers) and in two processes (two targets in a child
    process, `--processes 2`), with the CPU time per frame of each process; on one thread the
    next frame is decoded on a background thread meanwhile, so that line also gives the rate
-   on one core (1 / the process's CPU time per frame);
+   on one core (1 / the process's CPU time per frame); each configuration runs
+   `--multi-repeats` times (default 3), interleaved, and its line gives the median run and the
+   rate of every run (this VM's end-to-end figure varies by +-15% from run to run);
 3. start-up: the time from launching a fresh Python process to its first tracked frame, for a
    first process with an empty kernel cache and FFTW wisdom and a second one that finds them filled;
 4. the regression guard: AutoTrack's boxes against the pre-optimisation boxes kept in
@@ -199,26 +201,46 @@ def multi_target_pose(
     }
 
 
-def print_multi(
-    sequence: Path, threads: int, processes: int, pool: WorkerPool, default: bool
-) -> None:
-    """One line of section 2; `default`: this is what `autotrack localize` and the app choose
-    for four targets on this machine."""
-    multi = multi_target_pose(sequence, threads, processes, pool)
-    seconds = multi["seconds_per_frame"]
+def multi_configurations(
+    sequence: Path, repeats: int, pool: WorkerPool
+) -> list[tuple[tuple[int, int], list[dict]]]:
+    """Section 2's runs: every (threads, processes) configuration `repeats` times, interleaved
+    (one run of each, then the next round), so a slow spell of a shared machine hits them alike."""
+    configurations = ((1, 1), (2, 1), (1, 2))
+    runs: dict[tuple[int, int], list[dict]] = {c: [] for c in configurations}
+    for _ in range(repeats):
+        for threads, processes in configurations:
+            runs[(threads, processes)].append(multi_target_pose(sequence, threads, processes, pool))
+    return list(runs.items())
+
+
+def print_multi(configuration: tuple[int, int], runs: list[dict], default: bool) -> None:
+    """One line of section 2: the medians over a configuration's runs and every run's rate;
+    `default`: this is what `autotrack localize` and the app choose for four targets on this
+    machine."""
+    threads, processes = configuration
+
+    def median(field: str) -> float:
+        return statistics.median(run[field] for run in runs)
+
+    seconds, cpu_seconds = median("seconds_per_frame"), median("cpu_per_frame")
     label = f"{threads} thread{'s' if threads > 1 else ''}" + (
         f", {processes} processes" if processes > 1 else ""
     )
-    cpu = f"CPU {multi['cpu_per_frame'] * 1e3:.1f} ms/frame"
+    cpu = f"CPU {cpu_seconds * 1e3:.1f} ms/frame"
     if processes > 1:
-        cpu += f" here + {multi['children_cpu_per_frame'] * 1e3:.1f} in the child"
+        cpu += f" here + {median('children_cpu_per_frame') * 1e3:.1f} in the child"
     elif threads == 1:
         # The next frame is decoded on a background thread meanwhile, so the wall-clock figure
         # uses a second core for decoding; a machine with one core runs at 1 / CPU time.
-        cpu += f" = {1 / multi['cpu_per_frame']:.1f} frames/s on one core"
+        one_core = " ".join(f"{1 / run['cpu_per_frame']:.1f}" for run in runs)
+        cpu += f" = {1 / cpu_seconds:.1f} frames/s on one core (runs {one_core})"
+    rates = " ".join(f"{1 / run['seconds_per_frame']:.1f}" for run in runs)
+    valid = min(run["valid"] for run in runs)
     print(
         f"  {label:<23}: {seconds * 1e3:6.1f} ms/frame = {1 / seconds:5.1f} frames/s "
-        f"({cpu}; {multi['valid']}/{multi['frames']} valid poses)"
+        f"(median of {len(runs)} runs: {rates}; {cpu}; "
+        f"at least {valid}/{runs[0]['frames']} valid poses)"
         + ("  <- the default" if default else ""),
         flush=True,
     )
@@ -366,6 +388,9 @@ def main() -> int:
     parser.add_argument("--repeats", type=int, default=3, help="runs per tracker and sequence")
     parser.add_argument("--max-frames", type=int, default=None, help="first N frames only")
     parser.add_argument("--multi-frames", type=int, default=300)
+    parser.add_argument(
+        "--multi-repeats", type=int, default=3, help="interleaved runs of each section-2 line"
+    )
     parser.add_argument("--skip-single", action="store_true")
     parser.add_argument("--skip-multi", action="store_true")
     parser.add_argument("--skip-startup", action="store_true")
@@ -406,15 +431,16 @@ def main() -> int:
         with tempfile.TemporaryDirectory() as folder:
             sequence = render_multi_sequence(Path(folder), args.multi_frames)
             print(
-                f"\nfour targets + pose, {args.multi_frames} frames of 1280x720 JPEG, end to end:"
+                f"\nfour targets + pose, {args.multi_frames} frames of 1280x720 JPEG, end to end "
+                f"({args.multi_repeats} interleaved runs of each line):"
             )
             from autotrack.tracker.multi import default_concurrency
             from autotrack.tracker.target_process import WorkerPool
 
             default = default_concurrency(4)
             with WorkerPool() as pool:
-                for threads, processes in ((1, 1), (2, 1), (1, 2)):
-                    print_multi(sequence, threads, processes, pool, (threads, processes) == default)
+                for configuration, runs in multi_configurations(sequence, args.multi_repeats, pool):
+                    print_multi(configuration, runs, configuration == default)
 
     if not args.skip_startup:
         print_startup(args.startup_runs)
