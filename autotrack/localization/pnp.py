@@ -105,7 +105,11 @@ def weighted_refinement(
         return scale[:, None] * jac
 
     start = np.asarray(start, dtype=np.float64)
-    return least_squares(residuals, start, jac=jacobian, method="lm", xtol=1e-12, ftol=1e-12).x
+    # x_scale="jac" (MINPACK's own column scaling) is scipy >= 1.16's default; given here so
+    # that the pose does not depend on the installed scipy (1.11-1.15 scaled by 1).
+    return least_squares(
+        residuals, start, jac=jacobian, method="lm", xtol=1e-12, ftol=1e-12, x_scale="jac"
+    ).x
 
 
 def solve_pose(
