@@ -6,6 +6,7 @@ import json
 import os
 import subprocess
 import sys
+import time
 
 import numpy as np
 import pytest
@@ -21,27 +22,87 @@ def clean_env(monkeypatch, tmp_path):
     return tmp_path
 
 
-def test_writable_install_keeps_numbas_default(clean_env):
-    package = clean_env / "pkg"
-    assert compile_cache.configure_numba_cache(package) == package / "__pycache__"
-    assert "NUMBA_CACHE_DIR" not in os.environ
+def _package(folder, callee_body="return x + 1"):
+    """A package `pkg` in `folder` whose kernel `b.g` calls the kernel `a.f` of another module."""
+    package = folder / "pkg"
+    package.mkdir(parents=True, exist_ok=True)
+    (package / "__init__.py").write_text("")
+    (package / "a.py").write_text(
+        f"from numba import njit\n\n@njit(cache=True)\ndef f(x):\n    {callee_body}\n"
+    )
+    (package / "b.py").write_text(
+        "from numba import njit\nfrom pkg.a import f\n\n"
+        "@njit(cache=True)\ndef g(x):\n    return f(x) * 10\n"
+    )
+    return package
 
 
-def test_read_only_install_falls_back_to_the_user_cache(clean_env):
-    blocker = clean_env / "not-a-folder"
-    blocker.write_text("a file where the package folder should be")  # unwritable even for root
-    folder = compile_cache.configure_numba_cache(blocker / "pkg")
-    assert folder == clean_env / "user-cache" / "numba"
+def test_kernels_go_to_a_folder_named_by_the_sources(clean_env):
+    package = _package(clean_env)
+    folder = compile_cache.configure_numba_cache(package)
+    digest = compile_cache.source_digest(package)
+    assert folder == clean_env / "user-cache" / "numba" / f"kernels-{digest}"
     assert os.environ["NUMBA_CACHE_DIR"] == str(folder)
     assert compile_cache.is_writable_dir(folder)
+    # A child process inherits the folder as it is (no folder nested in it).
+    assert compile_cache.configure_numba_cache(package) == folder
+    (package / "a.py").write_text((package / "a.py").read_text().replace("+ 1", "+ 2"))
+    assert compile_cache.source_digest(package) != digest
+
+
+def test_a_writable_numba_cache_dir_holds_the_folder(clean_env, monkeypatch):
+    monkeypatch.setenv("NUMBA_CACHE_DIR", str(clean_env / "mine"))
+    folder = compile_cache.configure_numba_cache(_package(clean_env))
+    assert folder.parent == clean_env / "mine" and folder.name.startswith("kernels-")
 
 
 def test_unwritable_numba_cache_dir_is_replaced(clean_env, monkeypatch):
     blocker = clean_env / "file"
     blocker.write_text("x")
     monkeypatch.setenv("NUMBA_CACHE_DIR", str(blocker / "numba"))
-    folder = compile_cache.configure_numba_cache(clean_env / "pkg")
-    assert folder == clean_env / "user-cache" / "numba"
+    folder = compile_cache.configure_numba_cache(_package(clean_env))
+    assert folder.parent == clean_env / "user-cache" / "numba"
+
+
+def test_folders_of_old_sources_are_dropped_after_an_hour(clean_env, monkeypatch):
+    """The two newest other kernel folders stay; older ones go once unwritten for an hour."""
+    base = clean_env / "user-cache" / "numba"
+    now = time.time()
+    ages = {"kernels-a": 60, "kernels-b": 120, "kernels-c": 600, "kernels-d": 7200}
+    for name, age in [*ages.items(), ("unrelated", 9000)]:
+        (base / name).mkdir(parents=True)
+        os.utime(base / name, (now - age, now - age))
+    folder = compile_cache.configure_numba_cache(_package(clean_env))
+    left = sorted(p.name for p in base.iterdir())
+    assert left == sorted(["kernels-a", "kernels-c", "kernels-b", folder.name, "unrelated"])
+    os.utime(base / "kernels-c", (now - 8000, now - 8000))
+    monkeypatch.delenv("NUMBA_CACHE_DIR")  # a new process, not a child of this one
+    compile_cache.configure_numba_cache(_package(clean_env))
+    assert sorted(p.name for p in base.iterdir()) == sorted(
+        ["kernels-a", "kernels-b", folder.name, "unrelated"]
+    )
+
+
+def test_a_changed_callee_module_is_compiled_again(tmp_path):
+    """numba keys a cached kernel on its own file: without the digest folder, `g` would keep
+    calling the old `f` from its cache after a.py changed."""
+    package = _package(tmp_path)
+    env = dict(os.environ, NUMBA_CACHE_DIR=str(tmp_path / "numba"))
+    script = (
+        "import sys; from pathlib import Path\n"
+        "from autotrack.compile_cache import configure_numba_cache\n"
+        f"sys.path.insert(0, {str(tmp_path)!r})\n"
+        f"configure_numba_cache(Path({str(package)!r}))\n"
+        "from pkg.b import g\n"
+        "print(g(1))\n"
+    )
+    outputs = []
+    for body in ("return x + 1", "return x + 1", "return x + 2"):
+        _package(tmp_path, body)
+        done = subprocess.run([sys.executable, "-c", script], env=env, capture_output=True)
+        assert done.returncode == 0, done.stderr.decode()
+        outputs.append(int(done.stdout.split()[-1]))
+    assert outputs == [20, 20, 30]
 
 
 def test_spectrum_transform_returns_a_new_spectrum_each_call():
