@@ -24,211 +24,28 @@ where the approximation itself moves a gradient across a bin edge.
 from __future__ import annotations
 
 import math
-from functools import lru_cache
 
 import numpy as np
 from numba import njit
 
 from autotrack.errors import InputError
+from autotrack.tracker.fhog_histogram import (
+    gradient_histogram,
+    orientation_bins,
+    planar_float32,
+)
 
 FHOG_TRUNCATION_CHANNELS = 1
 """The toolbox appends one all-zero truncation channel; trackers drop it."""
 
-_PI = np.float32(3.14159265)  # the toolbox's PI (a float literal)
-_ACOS_STEPS = 10000  # acosTable: a[i] ~= acos(i / 10000)
-_ACOS_PAD = 10
-_ACOS_OFFSET = _ACOS_STEPS + _ACOS_PAD
 _TEXTURE_WEIGHT = np.float32(0.2357)  # ~ 1 / sqrt(18), hogChannels' r
 _HALF = np.float32(0.5)
 _ONE = np.float32(1.0)
-_MINUS_ONE = np.float32(-1.0)
-_BORDER_GAIN = np.float32(8.0) / np.float32(7.0)
-_ZERO_GRADIENT_INVERSE = np.float32(1e10)  # min(rsqrt(0), 1e10) in gradMag
 
 
 def fhog_channels(n_orients: int = 9) -> int:
     """Channels the toolbox returns: 2n sensitive + n insensitive + 4 texture + 1 zero."""
     return 3 * n_orients + 5
-
-
-@lru_cache(maxsize=1)
-def acos_table() -> np.ndarray:
-    """The toolbox's acosTable(): float32 acos(i / 10000) for i in [-10010, 10010), read-only.
-
-    Entries below -10000 are pi, above 9999 zero, and values above pi - 1e-6 are clamped to
-    pi - 1e-6 (so that adding pi for negative y-gradients stays below 2 pi). Index with
-    `int(x * 10000) + 10010`.
-    """
-    table = np.empty(2 * _ACOS_OFFSET, dtype=np.float32)
-    steps = np.arange(-_ACOS_STEPS, _ACOS_STEPS, dtype=np.float32) / np.float32(_ACOS_STEPS)
-    table[:_ACOS_PAD] = _PI
-    table[_ACOS_PAD : _ACOS_PAD + 2 * _ACOS_STEPS] = np.arccos(steps.astype(np.float64))
-    table[_ACOS_PAD + 2 * _ACOS_STEPS :] = 0.0
-    limit = _PI - np.float32(1e-6)
-    head = table[: _ACOS_OFFSET + _ACOS_STEPS // 10]
-    head[head > limit] = limit
-    table.flags.writeable = False
-    return table
-
-
-@njit(cache=True, nogil=True, fastmath=False, error_model="numpy")
-def _bin_coordinates(n_pixels, cell):
-    """Per pixel: left/top cell index (-1 before the first centre) and fractional offset.
-
-    Accumulates (i + 0.5) / cell - 0.5 in float32 exactly as gradHist does.
-    """
-    first = np.empty(n_pixels, np.int64)
-    frac = np.empty(n_pixels, np.float32)
-    step = _ONE / np.float32(cell)
-    position = _HALF * step - _HALF
-    for i in range(n_pixels):
-        index = -1 if i < cell // 2 else int(position)
-        first[i] = index
-        frac[i] = position - np.float32(index)
-        position += step
-    return first, frac
-
-
-@njit(cache=True, nogil=True, fastmath=False, error_model="numpy")
-def _planar_float32(image):
-    """(H, W, C) of any real dtype -> C-contiguous float32 (C, H, W), as `single(I)` does."""
-    height, width, channels = image.shape
-    planes = np.empty((channels, height, width), np.float32)
-    if channels == 3:  # the common RGB case, written so that LLVM vectorises the deinterleave
-        flat = image.reshape(height, width * 3)
-        for y in range(height):
-            row = flat[y]
-            red, green, blue = planes[0, y], planes[1, y], planes[2, y]
-            for x in range(width):
-                red[x] = np.float32(row[3 * x])
-                green[x] = np.float32(row[3 * x + 1])
-                blue[x] = np.float32(row[3 * x + 2])
-    else:
-        for y in range(height):
-            for c in range(channels):
-                source = image[y, :, c]
-                target = planes[c, y]
-                for x in range(width):
-                    target[x] = np.float32(source[x])
-    return planes
-
-
-@njit(cache=True, nogil=True, fastmath=False, error_model="numpy", inline="always")
-def _row_gradients(plane, y, gx, gy):
-    """gradient2 on one row: centred differences, one-sided with factor 1 at the image border.
-
-    Written with offset views so every loop index is a plain range index (vectorisable).
-    """
-    height, width = plane.shape
-    cols = gx.size
-    up = y - 1 if y > 0 else 0
-    down = y + 1 if y < height - 1 else height - 1
-    y_scale = _HALF if (y > 0 and y < height - 1) else _ONE
-    above, below, row = plane[up], plane[down], plane[y]
-    for x in range(cols):
-        gy[x] = (below[x] - above[x]) * y_scale
-    inner = min(cols, width - 1) - 1  # columns 1..inner have both neighbours
-    ahead, behind, centre = row[2 : 2 + inner], row[:inner], gx[1 : 1 + inner]
-    for i in range(inner):
-        centre[i] = (ahead[i] - behind[i]) * _HALF
-    gx[0] = row[1] - row[0]
-    if cols == width:
-        gx[cols - 1] = row[width - 1] - row[width - 2]
-
-
-@njit(cache=True, nogil=True, fastmath=False, error_model="numpy")
-def _gradient_histogram(planes, cell, n_bins, table, hist):
-    """gradMag (full orientation) + gradHist(softBin=-1): bilinear in space, hard in angle.
-
-    `planes` is float32 (C, H, W). Row by row in small vectorisable passes, branch-free where the
-    data decide (random gradient signs would defeat branch prediction).
-    """
-    channels = planes.shape[0]
-    hb, wb = hist.shape[0], hist.shape[1]
-    rows, cols = hb * cell, wb * cell
-    inv_cell2 = _ONE / np.float32(cell) / np.float32(cell)
-    bins_per_radian = np.float32(n_bins) / (np.float32(2.0) * _PI)
-    unit = np.float32(_ACOS_STEPS)
-    zero = np.float32(0.0)
-    x_first, x_frac = _bin_coordinates(cols, cell)
-    y_first, y_frac = _bin_coordinates(rows, cell)
-    gx = np.empty(cols, np.float32)
-    gy = np.empty(cols, np.float32)
-    squared = np.empty(cols, np.float32)
-    channel_gx = np.empty(cols, np.float32)
-    channel_gy = np.empty(cols, np.float32)
-    table_index = np.empty(cols, np.uint32)
-    angle_offset = np.empty(cols, np.float32)
-    weight = np.empty(cols, np.float32)
-    orient = np.empty(cols, np.int64)
-    for y in range(rows):
-        _row_gradients(planes[0], y, gx, gy)
-        for x in range(cols):
-            squared[x] = gx[x] * gx[x] + gy[x] * gy[x]
-        for c in range(1, channels):  # keep the channel of largest magnitude (strictly larger)
-            _row_gradients(planes[c], y, channel_gx, channel_gy)
-            for x in range(cols):  # unconditional stores of selects: this form vectorises
-                cx, cy, best = channel_gx[x], channel_gy[x], squared[x]
-                candidate = cx * cx + cy * cy
-                larger = candidate > best
-                squared[x] = candidate if larger else best
-                gx[x] = cx if larger else gx[x]
-                gy[x] = cy if larger else gy[x]
-        for x in range(cols):
-            magnitude = np.float32(math.sqrt(squared[x]))
-            inverse = min(_ONE / magnitude, _ZERO_GRADIENT_INVERSE)
-            negative = gy[x] < zero
-            # acos of the unit x-gradient, sign-flipped for negative y, via the toolbox's table;
-            # adding pi below maps the angle to [0, 2 pi). (atan2 would differ at bin edges only.)
-            sign = _MINUS_ONE if negative else _ONE
-            table_index[x] = np.int32(gx[x] * inverse * unit * sign) + _ACOS_OFFSET
-            angle_offset[x] = _PI if negative else zero
-            weight[x] = magnitude * inv_cell2
-        for x in range(cols):
-            angle = table[table_index[x]] + angle_offset[x]
-            bin_index = int(angle * bins_per_radian + _HALF)
-            orient[x] = 0 if bin_index >= n_bins else bin_index
-        y0 = y_first[y]
-        yd = y_frac[y]
-        for x in range(cols):
-            m = weight[x]
-            o = orient[x]
-            x0 = x_first[x]
-            xd = x_frac[x]
-            xyd = xd * yd
-            w00 = _ONE - xd - yd + xyd
-            w10 = yd - xyd
-            w01 = xd - xyd
-            w11 = xyd
-            has_left = x0 >= 0
-            has_right = x0 < wb - 1
-            if y0 < 0:  # leading rows: only the cell row below the first centre line
-                if has_left:
-                    hist[0, x0, o] += w10 * m
-                if has_right:
-                    hist[0, x0 + 1, o] += w11 * m
-            elif y0 < hb - 1:
-                if has_left:
-                    hist[y0, x0, o] += w00 * m
-                    hist[y0 + 1, x0, o] += w10 * m
-                if has_right:
-                    hist[y0, x0 + 1, o] += w01 * m
-                    hist[y0 + 1, x0 + 1, o] += w11 * m
-            else:  # final rows: no cell row below
-                if has_left:
-                    hist[y0, x0, o] += w00 * m
-                if has_right:
-                    hist[y0, x0 + 1, o] += w01 * m
-    # Border cells only receive 7/8 of an interior cell's weight (gradHist, softBin odd).
-    for o in range(n_bins):
-        for y in range(hb):
-            hist[y, 0, o] *= _BORDER_GAIN
-        for x in range(wb):
-            hist[0, x, o] *= _BORDER_GAIN
-        for y in range(hb):
-            hist[y, wb - 1, o] *= _BORDER_GAIN
-        for x in range(wb):
-            hist[hb - 1, x, o] *= _BORDER_GAIN
 
 
 @njit(cache=True, nogil=True, fastmath=False, error_model="numpy")
@@ -294,7 +111,7 @@ def _normalised_row(by_channel, o, norm, y, clip, weights, out, sums, texture):
 
 
 @njit(cache=True, nogil=True, fastmath=False, error_model="numpy")
-def _fhog_into(image, cell, n_orients, clip, table, weights, out):
+def _fhog_into(image, cell, n_orients, clip, bins, weights, out):
     """fhog of one (H, W, C) image, each cell's values times `weights[y, x]`, into `out`
     (>= 3n+4, H//cell, W//cell), channel-first, any strides (a channel-first slice of a
     transform's input buffer, or a transposed view of a channel-last array); channels past
@@ -310,7 +127,7 @@ def _fhog_into(image, cell, n_orients, clip, table, weights, out):
         return
     n_bins = 2 * n_orients
     sensitive = np.zeros((hb, wb, n_bins), np.float32)
-    _gradient_histogram(_planar_float32(image), cell, n_bins, table, sensitive)
+    gradient_histogram(planar_float32(image), cell, bins, sensitive)
     insensitive = np.empty((hb, wb, n_orients), np.float32)
     for y in range(hb):
         for x in range(wb):
@@ -337,7 +154,7 @@ def _fhog_into(image, cell, n_orients, clip, table, weights, out):
 
 
 @njit(cache=True, nogil=True, fastmath=False, error_model="numpy")
-def _fhog_batch_into(images, cell, n_orients, clip, table, sample_weights, out):
+def _fhog_batch_into(images, cell, n_orients, clip, bins, sample_weights, out):
     """`_fhog_into` of each image into `out` (N, H//cell, W//cell, C), channel-last, all of
     image i's values times `sample_weights[i]` (channels `_fhog_into` leaves stay zero)."""
     count, rows, cols, channels = out.shape
@@ -345,7 +162,7 @@ def _fhog_batch_into(images, cell, n_orients, clip, table, sample_weights, out):
     channel_first = np.zeros((channels, rows, cols), np.float32)
     for i in range(count):
         weights[:] = sample_weights[i]
-        _fhog_into(images[i], cell, n_orients, clip, table, weights, channel_first)
+        _fhog_into(images[i], cell, n_orients, clip, bins, weights, channel_first)
         target = out[i]
         for y in range(rows):
             for x in range(cols):
@@ -400,13 +217,13 @@ def fhog(
         (height // cell_size, width // cell_size, fhog_channels(n_orients)), dtype=np.float32
     )
     weights = np.ones(out.shape[:2], np.float32)
-    table = acos_table()
+    bins = orientation_bins(int(n_orients))
     _fhog_into(
         pixels,
         int(cell_size),
         int(n_orients),
         np.float32(clip),
-        table,
+        bins,
         weights,
         out.transpose(2, 0, 1),
     )
@@ -434,8 +251,8 @@ def fhog_weighted_into(
             f"fhog of a {pixels.shape[0]} x {pixels.shape[1]} image at cell {cell_size} needs "
             f"weights {cells} and out {shape}, got {weights.shape} and {out.shape}"
         )
-    table = acos_table()
-    _fhog_into(pixels, int(cell_size), int(n_orients), np.float32(clip), table, weights, out)
+    bins = orientation_bins(int(n_orients))
+    _fhog_into(pixels, int(cell_size), int(n_orients), np.float32(clip), bins, weights, out)
 
 
 def fhog_batch(
@@ -468,6 +285,6 @@ def fhog_batch(
             raise InputError(f"fhog_batch needs {count} sample weights, got {weights.shape}")
         channels -= FHOG_TRUNCATION_CHANNELS
     out = np.empty((count, height // cell_size, width // cell_size, channels), np.float32)
-    table = acos_table()
-    _fhog_batch_into(pixels, int(cell_size), int(n_orients), np.float32(clip), table, weights, out)
+    bins = orientation_bins(int(n_orients))
+    _fhog_batch_into(pixels, int(cell_size), int(n_orients), np.float32(clip), bins, weights, out)
     return out
