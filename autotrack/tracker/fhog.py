@@ -24,23 +24,25 @@ where the approximation itself moves a gradient across a bin edge.
 from __future__ import annotations
 
 import math
+from functools import lru_cache
 
 import numpy as np
 from numba import njit
 
 from autotrack.errors import InputError
-from autotrack.tracker.fhog_histogram import (
-    gradient_histogram,
-    orientation_bins,
-    planar_float32,
+from autotrack.tracker.fhog_kernels import (
+    _ACOS_ENTRIES,
+    _ACOS_OFFSET,
+    _ACOS_PAD,
+    _ACOS_STEPS,
+    _HALF,
+    _PI,
+    _fhog_batch_into,
+    _fhog_into,
 )
 
 FHOG_TRUNCATION_CHANNELS = 1
 """The toolbox appends one all-zero truncation channel; trackers drop it."""
-
-_TEXTURE_WEIGHT = np.float32(0.2357)  # ~ 1 / sqrt(18), hogChannels' r
-_HALF = np.float32(0.5)
-_ONE = np.float32(1.0)
 
 
 def fhog_channels(n_orients: int = 9) -> int:
@@ -48,126 +50,48 @@ def fhog_channels(n_orients: int = 9) -> int:
     return 3 * n_orients + 5
 
 
-@njit(cache=True, nogil=True, fastmath=False, error_model="numpy")
-def _block_normalisers(insensitive, cell):
-    """hogNormMatrix: 1/sqrt(2x2 block energy + eps) on an (hb+1, wb+1) grid, border copied.
+@lru_cache(maxsize=1)
+def acos_table() -> np.ndarray:
+    """The toolbox's acosTable(): float32 acos(i / 10000) for i in [-10010, 10010), read-only.
 
-    Entry [i+1, j+1] belongs to the block whose top-left cell is (i, j). The border is filled in
-    the C code's order, which matters only when hb or wb is 1 (then raw energies leak through,
-    as in the toolbox).
+    Entries below -10000 are pi, above 9999 zero, and values above pi - 1e-6 are clamped to
+    pi - 1e-6 (so that adding pi for negative y-gradients stays below 2 pi). Index with
+    `int(x * 10000) + 10010`.
     """
-    hb, wb, n_orients = insensitive.shape
-    norm = np.zeros((hb + 1, wb + 1), np.float32)
-    for o in range(n_orients):
-        for y in range(hb):
-            for x in range(wb):
-                value = insensitive[y, x, o]
-                norm[y + 1, x + 1] += value * value
-    eps = np.float32(1e-4) / np.float32(4.0)
-    for _ in range(4):
-        eps = eps / np.float32(cell)
-    for x in range(wb - 1):
-        for y in range(hb - 1):
-            total = (
-                norm[y + 1, x + 1] + norm[y + 2, x + 1] + norm[y + 1, x + 2] + norm[y + 2, x + 2]
-            ) + eps
-            norm[y + 1, x + 1] = _ONE / np.float32(math.sqrt(total))
-    last_x, last_y = wb, hb
-    norm[0, 0] = norm[1, 1]
-    for y in range(hb + 1):
-        norm[y, 0] = norm[y, 1]
-    norm[last_y, 0] = norm[last_y - 1, 1]
-    norm[0, last_x] = norm[1, last_x - 1]
-    for y in range(hb + 1):
-        norm[y, last_x] = norm[y, last_x - 1]
-    norm[last_y, last_x] = norm[last_y - 1, last_x - 1]
-    for x in range(wb + 1):
-        norm[0, x] = norm[1, x]
-    for x in range(wb + 1):
-        norm[last_y, x] = norm[last_y - 1, x]
-    return norm
-
-
-@njit(cache=True, nogil=True, fastmath=False, error_model="numpy", inline="always")
-def _normalised_row(by_channel, o, norm, y, clip, weights, out, sums, texture):
-    """Cell row y of orientation channel o (hogChannels): the mean of each cell's value under
-    its four block normalisers, each clipped, times `weights`, into `out[o, y]`; with
-    `texture`, the clipped values times the texture weight are added to `sums` (4, cols).
-    Inlined, with plain indexing and no array views: a call or a view per row costs reference
-    counting, which on the scale filter's 6 x 4-cell samples was most of the time."""
-    for x in range(by_channel.shape[1]):
-        r = by_channel[o, x]
-        # The four blocks containing cell (y, x): hogChannels' GETT(0), (1), (hb1), (hb1+1).
-        t0 = min(r * norm[y + 1, x + 1], clip)
-        t1 = min(r * norm[y, x + 1], clip)
-        t2 = min(r * norm[y + 1, x], clip)
-        t3 = min(r * norm[y, x], clip)
-        out[o, y, x] = (t0 * _HALF + t1 * _HALF + t2 * _HALF + t3 * _HALF) * weights[y, x]
-        if texture:
-            sums[0, x] += t0 * _TEXTURE_WEIGHT
-            sums[1, x] += t1 * _TEXTURE_WEIGHT
-            sums[2, x] += t2 * _TEXTURE_WEIGHT
-            sums[3, x] += t3 * _TEXTURE_WEIGHT
+    table = np.empty(_ACOS_ENTRIES, dtype=np.float32)
+    steps = np.arange(-_ACOS_STEPS, _ACOS_STEPS, dtype=np.float32) / np.float32(_ACOS_STEPS)
+    table[:_ACOS_PAD] = _PI
+    table[_ACOS_PAD : _ACOS_PAD + 2 * _ACOS_STEPS] = np.arccos(steps.astype(np.float64))
+    table[_ACOS_PAD + 2 * _ACOS_STEPS :] = 0.0
+    limit = _PI - np.float32(1e-6)
+    head = table[: _ACOS_OFFSET + _ACOS_STEPS // 10]
+    head[head > limit] = limit
+    table.flags.writeable = False
+    return table
 
 
 @njit(cache=True, nogil=True, fastmath=False, error_model="numpy")
-def _fhog_into(image, cell, n_orients, clip, bins, weights, out):
-    """fhog of one (H, W, C) image, each cell's values times `weights[y, x]`, into `out`
-    (>= 3n+4, H//cell, W//cell), channel-first, any strides (a channel-first slice of a
-    transform's input buffer, or a transposed view of a channel-last array); channels past
-    3n+4 (the toolbox's zero channel) are left as they are.
+def _orientation_bin_table(table, n_bins, bins):
+    """bins[i] (i < len(table)) and bins[len(table) + i]: the bin of angle table[i], and of
+    table[i] + pi, in gradHist's float32 arithmetic (as the per-pixel code computed it)."""
+    entries = table.size
+    bins_per_radian = np.float32(n_bins) / (np.float32(2.0) * _PI)
+    for i in range(2 * entries):
+        offset = _PI if i >= entries else np.float32(0.0)
+        angle = table[i % entries] + offset
+        bin_index = int(angle * bins_per_radian + _HALF)
+        bins[i] = 0 if bin_index >= n_bins else bin_index
 
-    A float32 product rounds once wherever it is taken, so `out` holds exactly what the
-    unweighted features times the weights would give (weights of one give the features). The
-    normalisation runs along whole cell rows, one channel at a time, each texture sum still
-    taken over the orientations in the toolbox's order.
-    """
-    hb, wb = out.shape[1], out.shape[2]
-    if hb == 0 or wb == 0:
-        return
+
+@lru_cache(maxsize=8)
+def orientation_bins(n_orients: int) -> np.ndarray:
+    """The sensitive orientation bin (of 2 n_orients) per acos-table index, read-only: entry
+    `index` for a non-negative y-gradient, `len(acos_table()) + index` for a negative one."""
     n_bins = 2 * n_orients
-    sensitive = np.zeros((hb, wb, n_bins), np.float32)
-    gradient_histogram(planar_float32(image), cell, bins, sensitive)
-    insensitive = np.empty((hb, wb, n_orients), np.float32)
-    for y in range(hb):
-        for x in range(wb):
-            for o in range(n_orients):
-                insensitive[y, x, o] = sensitive[y, x, o] + sensitive[y, x, o + n_orients]
-    norm = _block_normalisers(insensitive, cell)
-    texture_first = 3 * n_orients
-    by_channel = np.empty((n_bins + n_orients, wb), np.float32)  # one cell row, channel-major
-    sums = np.empty((4, wb), np.float32)
-    for y in range(hb):
-        for x in range(wb):
-            for o in range(n_bins):
-                by_channel[o, x] = sensitive[y, x, o]
-            for o in range(n_orients):
-                by_channel[n_bins + o, x] = insensitive[y, x, o]
-        for k in range(4):
-            for x in range(wb):
-                sums[k, x] = 0.0
-        for o in range(n_bins + n_orients):
-            _normalised_row(by_channel, o, norm, y, clip, weights, out, sums, o < n_bins)
-        for k in range(4):
-            for x in range(wb):
-                out[texture_first + k, y, x] = sums[k, x] * weights[y, x]
-
-
-@njit(cache=True, nogil=True, fastmath=False, error_model="numpy")
-def _fhog_batch_into(images, cell, n_orients, clip, bins, sample_weights, out):
-    """`_fhog_into` of each image into `out` (N, H//cell, W//cell, C), channel-last, all of
-    image i's values times `sample_weights[i]` (channels `_fhog_into` leaves stay zero)."""
-    count, rows, cols, channels = out.shape
-    weights = np.empty((rows, cols), np.float32)
-    channel_first = np.zeros((channels, rows, cols), np.float32)
-    for i in range(count):
-        weights[:] = sample_weights[i]
-        _fhog_into(images[i], cell, n_orients, clip, bins, weights, channel_first)
-        target = out[i]
-        for y in range(rows):
-            for x in range(cols):
-                for c in range(channels):
-                    target[y, x, c] = channel_first[c, y, x]
+    bins = np.empty(2 * _ACOS_ENTRIES, np.uint8 if n_bins <= 255 else np.int32)
+    _orientation_bin_table(acos_table(), n_bins, bins)
+    bins.flags.writeable = False
+    return bins
 
 
 def _as_kernel_input(images: np.ndarray, image_axes: int) -> np.ndarray:
