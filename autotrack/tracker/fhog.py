@@ -30,19 +30,20 @@ import numpy as np
 from numba import njit
 
 from autotrack.errors import InputError
-from autotrack.tracker.fhog_kernels import (
-    _ACOS_ENTRIES,
-    _ACOS_OFFSET,
-    _ACOS_PAD,
-    _ACOS_STEPS,
-    _HALF,
-    _PI,
-    _fhog_batch_into,
-    _fhog_into,
-)
 
 FHOG_TRUNCATION_CHANNELS = 1
 """The toolbox appends one all-zero truncation channel; trackers drop it."""
+
+_PI = np.float32(3.14159265)  # the toolbox's PI (a float literal)
+_ACOS_STEPS = 10000  # acosTable: a[i] ~= acos(i / 10000)
+_ACOS_PAD = 10
+_ACOS_OFFSET = _ACOS_STEPS + _ACOS_PAD
+_TEXTURE_WEIGHT = np.float32(0.2357)  # ~ 1 / sqrt(18), hogChannels' r
+_HALF = np.float32(0.5)
+_ONE = np.float32(1.0)
+_MINUS_ONE = np.float32(-1.0)
+_BORDER_GAIN = np.float32(8.0) / np.float32(7.0)
+_ZERO_GRADIENT_INVERSE = np.float32(1e10)  # min(rsqrt(0), 1e10) in gradMag
 
 
 def fhog_channels(n_orients: int = 9) -> int:
@@ -58,7 +59,7 @@ def acos_table() -> np.ndarray:
     pi - 1e-6 (so that adding pi for negative y-gradients stays below 2 pi). Index with
     `int(x * 10000) + 10010`.
     """
-    table = np.empty(_ACOS_ENTRIES, dtype=np.float32)
+    table = np.empty(2 * _ACOS_OFFSET, dtype=np.float32)
     steps = np.arange(-_ACOS_STEPS, _ACOS_STEPS, dtype=np.float32) / np.float32(_ACOS_STEPS)
     table[:_ACOS_PAD] = _PI
     table[_ACOS_PAD : _ACOS_PAD + 2 * _ACOS_STEPS] = np.arccos(steps.astype(np.float64))
@@ -71,27 +72,285 @@ def acos_table() -> np.ndarray:
 
 
 @njit(cache=True, nogil=True, fastmath=False, error_model="numpy")
-def _orientation_bin_table(table, n_bins, bins):
-    """bins[i] (i < len(table)) and bins[len(table) + i]: the bin of angle table[i], and of
-    table[i] + pi, in gradHist's float32 arithmetic (as the per-pixel code computed it)."""
-    entries = table.size
+def _bin_coordinates(n_pixels, cell):
+    """Per pixel: left/top cell index (-1 before the first centre) and fractional offset.
+
+    Accumulates (i + 0.5) / cell - 0.5 in float32 exactly as gradHist does.
+    """
+    first = np.empty(n_pixels, np.int64)
+    frac = np.empty(n_pixels, np.float32)
+    step = _ONE / np.float32(cell)
+    position = _HALF * step - _HALF
+    for i in range(n_pixels):
+        index = -1 if i < cell // 2 else int(position)
+        first[i] = index
+        frac[i] = position - np.float32(index)
+        position += step
+    return first, frac
+
+
+@njit(cache=True, nogil=True, fastmath=False, error_model="numpy")
+def _planar_float32(image):
+    """(H, W, C) of any real dtype -> C-contiguous float32 (C, H, W), as `single(I)` does."""
+    height, width, channels = image.shape
+    planes = np.empty((channels, height, width), np.float32)
+    if channels == 3:  # the common RGB case, written so that LLVM vectorises the deinterleave
+        flat = image.reshape(height, width * 3)
+        for y in range(height):
+            row = flat[y]
+            red, green, blue = planes[0, y], planes[1, y], planes[2, y]
+            for x in range(width):
+                red[x] = np.float32(row[3 * x])
+                green[x] = np.float32(row[3 * x + 1])
+                blue[x] = np.float32(row[3 * x + 2])
+    else:
+        for y in range(height):
+            for c in range(channels):
+                source = image[y, :, c]
+                target = planes[c, y]
+                for x in range(width):
+                    target[x] = np.float32(source[x])
+    return planes
+
+
+@njit(cache=True, nogil=True, fastmath=False, error_model="numpy", inline="always")
+def _row_gradients(plane, y, gx, gy):
+    """gradient2 on one row: centred differences, one-sided with factor 1 at the image border.
+
+    Written with offset views so every loop index is a plain range index (vectorisable).
+    """
+    height, width = plane.shape
+    cols = gx.size
+    up = y - 1 if y > 0 else 0
+    down = y + 1 if y < height - 1 else height - 1
+    y_scale = _HALF if (y > 0 and y < height - 1) else _ONE
+    above, below, row = plane[up], plane[down], plane[y]
+    for x in range(cols):
+        gy[x] = (below[x] - above[x]) * y_scale
+    inner = min(cols, width - 1) - 1  # columns 1..inner have both neighbours
+    ahead, behind, centre = row[2 : 2 + inner], row[:inner], gx[1 : 1 + inner]
+    for i in range(inner):
+        centre[i] = (ahead[i] - behind[i]) * _HALF
+    gx[0] = row[1] - row[0]
+    if cols == width:
+        gx[cols - 1] = row[width - 1] - row[width - 2]
+
+
+@njit(cache=True, nogil=True, fastmath=False, error_model="numpy")
+def _gradient_histogram(planes, cell, n_bins, table, hist):
+    """gradMag (full orientation) + gradHist(softBin=-1): bilinear in space, hard in angle.
+
+    `planes` is float32 (C, H, W). Row by row in small vectorisable passes, branch-free where the
+    data decide (random gradient signs would defeat branch prediction).
+    """
+    channels = planes.shape[0]
+    hb, wb = hist.shape[0], hist.shape[1]
+    rows, cols = hb * cell, wb * cell
+    inv_cell2 = _ONE / np.float32(cell) / np.float32(cell)
     bins_per_radian = np.float32(n_bins) / (np.float32(2.0) * _PI)
-    for i in range(2 * entries):
-        offset = _PI if i >= entries else np.float32(0.0)
-        angle = table[i % entries] + offset
-        bin_index = int(angle * bins_per_radian + _HALF)
-        bins[i] = 0 if bin_index >= n_bins else bin_index
+    unit = np.float32(_ACOS_STEPS)
+    zero = np.float32(0.0)
+    x_first, x_frac = _bin_coordinates(cols, cell)
+    y_first, y_frac = _bin_coordinates(rows, cell)
+    gx = np.empty(cols, np.float32)
+    gy = np.empty(cols, np.float32)
+    squared = np.empty(cols, np.float32)
+    channel_gx = np.empty(cols, np.float32)
+    channel_gy = np.empty(cols, np.float32)
+    table_index = np.empty(cols, np.uint32)
+    angle_offset = np.empty(cols, np.float32)
+    weight = np.empty(cols, np.float32)
+    orient = np.empty(cols, np.int64)
+    for y in range(rows):
+        _row_gradients(planes[0], y, gx, gy)
+        for x in range(cols):
+            squared[x] = gx[x] * gx[x] + gy[x] * gy[x]
+        for c in range(1, channels):  # keep the channel of largest magnitude (strictly larger)
+            _row_gradients(planes[c], y, channel_gx, channel_gy)
+            for x in range(cols):  # unconditional stores of selects: this form vectorises
+                cx, cy, best = channel_gx[x], channel_gy[x], squared[x]
+                candidate = cx * cx + cy * cy
+                larger = candidate > best
+                squared[x] = candidate if larger else best
+                gx[x] = cx if larger else gx[x]
+                gy[x] = cy if larger else gy[x]
+        for x in range(cols):
+            magnitude = np.float32(math.sqrt(squared[x]))
+            inverse = min(_ONE / magnitude, _ZERO_GRADIENT_INVERSE)
+            negative = gy[x] < zero
+            # acos of the unit x-gradient, sign-flipped for negative y, via the toolbox's table;
+            # adding pi below maps the angle to [0, 2 pi). (atan2 would differ at bin edges only.)
+            sign = _MINUS_ONE if negative else _ONE
+            table_index[x] = np.int32(gx[x] * inverse * unit * sign) + _ACOS_OFFSET
+            angle_offset[x] = _PI if negative else zero
+            weight[x] = magnitude * inv_cell2
+        for x in range(cols):
+            angle = table[table_index[x]] + angle_offset[x]
+            bin_index = int(angle * bins_per_radian + _HALF)
+            orient[x] = 0 if bin_index >= n_bins else bin_index
+        y0 = y_first[y]
+        yd = y_frac[y]
+        for x in range(cols):
+            m = weight[x]
+            o = orient[x]
+            x0 = x_first[x]
+            xd = x_frac[x]
+            xyd = xd * yd
+            w00 = _ONE - xd - yd + xyd
+            w10 = yd - xyd
+            w01 = xd - xyd
+            w11 = xyd
+            has_left = x0 >= 0
+            has_right = x0 < wb - 1
+            if y0 < 0:  # leading rows: only the cell row below the first centre line
+                if has_left:
+                    hist[0, x0, o] += w10 * m
+                if has_right:
+                    hist[0, x0 + 1, o] += w11 * m
+            elif y0 < hb - 1:
+                if has_left:
+                    hist[y0, x0, o] += w00 * m
+                    hist[y0 + 1, x0, o] += w10 * m
+                if has_right:
+                    hist[y0, x0 + 1, o] += w01 * m
+                    hist[y0 + 1, x0 + 1, o] += w11 * m
+            else:  # final rows: no cell row below
+                if has_left:
+                    hist[y0, x0, o] += w00 * m
+                if has_right:
+                    hist[y0, x0 + 1, o] += w01 * m
+    # Border cells only receive 7/8 of an interior cell's weight (gradHist, softBin odd).
+    for o in range(n_bins):
+        for y in range(hb):
+            hist[y, 0, o] *= _BORDER_GAIN
+        for x in range(wb):
+            hist[0, x, o] *= _BORDER_GAIN
+        for y in range(hb):
+            hist[y, wb - 1, o] *= _BORDER_GAIN
+        for x in range(wb):
+            hist[hb - 1, x, o] *= _BORDER_GAIN
 
 
-@lru_cache(maxsize=8)
-def orientation_bins(n_orients: int) -> np.ndarray:
-    """The sensitive orientation bin (of 2 n_orients) per acos-table index, read-only: entry
-    `index` for a non-negative y-gradient, `len(acos_table()) + index` for a negative one."""
+@njit(cache=True, nogil=True, fastmath=False, error_model="numpy")
+def _block_normalisers(insensitive, cell):
+    """hogNormMatrix: 1/sqrt(2x2 block energy + eps) on an (hb+1, wb+1) grid, border copied.
+
+    Entry [i+1, j+1] belongs to the block whose top-left cell is (i, j). The border is filled in
+    the C code's order, which matters only when hb or wb is 1 (then raw energies leak through,
+    as in the toolbox).
+    """
+    hb, wb, n_orients = insensitive.shape
+    norm = np.zeros((hb + 1, wb + 1), np.float32)
+    for o in range(n_orients):
+        for y in range(hb):
+            for x in range(wb):
+                value = insensitive[y, x, o]
+                norm[y + 1, x + 1] += value * value
+    eps = np.float32(1e-4) / np.float32(4.0)
+    for _ in range(4):
+        eps = eps / np.float32(cell)
+    for x in range(wb - 1):
+        for y in range(hb - 1):
+            total = (
+                norm[y + 1, x + 1] + norm[y + 2, x + 1] + norm[y + 1, x + 2] + norm[y + 2, x + 2]
+            ) + eps
+            norm[y + 1, x + 1] = _ONE / np.float32(math.sqrt(total))
+    last_x, last_y = wb, hb
+    norm[0, 0] = norm[1, 1]
+    for y in range(hb + 1):
+        norm[y, 0] = norm[y, 1]
+    norm[last_y, 0] = norm[last_y - 1, 1]
+    norm[0, last_x] = norm[1, last_x - 1]
+    for y in range(hb + 1):
+        norm[y, last_x] = norm[y, last_x - 1]
+    norm[last_y, last_x] = norm[last_y - 1, last_x - 1]
+    for x in range(wb + 1):
+        norm[0, x] = norm[1, x]
+    for x in range(wb + 1):
+        norm[last_y, x] = norm[last_y - 1, x]
+    return norm
+
+
+@njit(cache=True, nogil=True, fastmath=False, error_model="numpy", inline="always")
+def _normalised_row(by_channel, o, norm, y, clip, weights, out, sums, texture):
+    """Cell row y of orientation channel o (hogChannels): the mean of each cell's value under
+    its four block normalisers, each clipped, times `weights`, into `out[o, y]`; with
+    `texture`, the clipped values times the texture weight are added to `sums` (4, cols).
+    Inlined, with plain indexing and no array views: a call or a view per row costs reference
+    counting, which on the scale filter's 6 x 4-cell samples was most of the time."""
+    for x in range(by_channel.shape[1]):
+        r = by_channel[o, x]
+        # The four blocks containing cell (y, x): hogChannels' GETT(0), (1), (hb1), (hb1+1).
+        t0 = min(r * norm[y + 1, x + 1], clip)
+        t1 = min(r * norm[y, x + 1], clip)
+        t2 = min(r * norm[y + 1, x], clip)
+        t3 = min(r * norm[y, x], clip)
+        out[o, y, x] = (t0 * _HALF + t1 * _HALF + t2 * _HALF + t3 * _HALF) * weights[y, x]
+        if texture:
+            sums[0, x] += t0 * _TEXTURE_WEIGHT
+            sums[1, x] += t1 * _TEXTURE_WEIGHT
+            sums[2, x] += t2 * _TEXTURE_WEIGHT
+            sums[3, x] += t3 * _TEXTURE_WEIGHT
+
+
+@njit(cache=True, nogil=True, fastmath=False, error_model="numpy")
+def _fhog_into(image, cell, n_orients, clip, table, weights, out):
+    """fhog of one (H, W, C) image, each cell's values times `weights[y, x]`, into `out`
+    (>= 3n+4, H//cell, W//cell), channel-first, any strides (a channel-first slice of a
+    transform's input buffer, or a transposed view of a channel-last array); channels past
+    3n+4 (the toolbox's zero channel) are left as they are.
+
+    A float32 product rounds once wherever it is taken, so `out` holds exactly what the
+    unweighted features times the weights would give (weights of one give the features). The
+    normalisation runs along whole cell rows, one channel at a time, each texture sum still
+    taken over the orientations in the toolbox's order.
+    """
+    hb, wb = out.shape[1], out.shape[2]
+    if hb == 0 or wb == 0:
+        return
     n_bins = 2 * n_orients
-    bins = np.empty(2 * _ACOS_ENTRIES, np.uint8 if n_bins <= 255 else np.int32)
-    _orientation_bin_table(acos_table(), n_bins, bins)
-    bins.flags.writeable = False
-    return bins
+    sensitive = np.zeros((hb, wb, n_bins), np.float32)
+    _gradient_histogram(_planar_float32(image), cell, n_bins, table, sensitive)
+    insensitive = np.empty((hb, wb, n_orients), np.float32)
+    for y in range(hb):
+        for x in range(wb):
+            for o in range(n_orients):
+                insensitive[y, x, o] = sensitive[y, x, o] + sensitive[y, x, o + n_orients]
+    norm = _block_normalisers(insensitive, cell)
+    texture_first = 3 * n_orients
+    by_channel = np.empty((n_bins + n_orients, wb), np.float32)  # one cell row, channel-major
+    sums = np.empty((4, wb), np.float32)
+    for y in range(hb):
+        for x in range(wb):
+            for o in range(n_bins):
+                by_channel[o, x] = sensitive[y, x, o]
+            for o in range(n_orients):
+                by_channel[n_bins + o, x] = insensitive[y, x, o]
+        for k in range(4):
+            for x in range(wb):
+                sums[k, x] = 0.0
+        for o in range(n_bins + n_orients):
+            _normalised_row(by_channel, o, norm, y, clip, weights, out, sums, o < n_bins)
+        for k in range(4):
+            for x in range(wb):
+                out[texture_first + k, y, x] = sums[k, x] * weights[y, x]
+
+
+@njit(cache=True, nogil=True, fastmath=False, error_model="numpy")
+def _fhog_batch_into(images, cell, n_orients, clip, table, sample_weights, out):
+    """`_fhog_into` of each image into `out` (N, H//cell, W//cell, C), channel-last, all of
+    image i's values times `sample_weights[i]` (channels `_fhog_into` leaves stay zero)."""
+    count, rows, cols, channels = out.shape
+    weights = np.empty((rows, cols), np.float32)
+    channel_first = np.zeros((channels, rows, cols), np.float32)
+    for i in range(count):
+        weights[:] = sample_weights[i]
+        _fhog_into(images[i], cell, n_orients, clip, table, weights, channel_first)
+        target = out[i]
+        for y in range(rows):
+            for x in range(cols):
+                for c in range(channels):
+                    target[y, x, c] = channel_first[c, y, x]
 
 
 def _as_kernel_input(images: np.ndarray, image_axes: int) -> np.ndarray:
@@ -141,13 +400,13 @@ def fhog(
         (height // cell_size, width // cell_size, fhog_channels(n_orients)), dtype=np.float32
     )
     weights = np.ones(out.shape[:2], np.float32)
-    bins = orientation_bins(int(n_orients))
+    table = acos_table()
     _fhog_into(
         pixels,
         int(cell_size),
         int(n_orients),
         np.float32(clip),
-        bins,
+        table,
         weights,
         out.transpose(2, 0, 1),
     )
@@ -175,8 +434,8 @@ def fhog_weighted_into(
             f"fhog of a {pixels.shape[0]} x {pixels.shape[1]} image at cell {cell_size} needs "
             f"weights {cells} and out {shape}, got {weights.shape} and {out.shape}"
         )
-    bins = orientation_bins(int(n_orients))
-    _fhog_into(pixels, int(cell_size), int(n_orients), np.float32(clip), bins, weights, out)
+    table = acos_table()
+    _fhog_into(pixels, int(cell_size), int(n_orients), np.float32(clip), table, weights, out)
 
 
 def fhog_batch(
@@ -209,6 +468,6 @@ def fhog_batch(
             raise InputError(f"fhog_batch needs {count} sample weights, got {weights.shape}")
         channels -= FHOG_TRUNCATION_CHANNELS
     out = np.empty((count, height // cell_size, width // cell_size, channels), np.float32)
-    bins = orientation_bins(int(n_orients))
-    _fhog_batch_into(pixels, int(cell_size), int(n_orients), np.float32(clip), bins, weights, out)
+    table = acos_table()
+    _fhog_batch_into(pixels, int(cell_size), int(n_orients), np.float32(clip), table, weights, out)
     return out
