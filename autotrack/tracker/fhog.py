@@ -72,6 +72,28 @@ def acos_table() -> np.ndarray:
 
 
 @njit(cache=True, nogil=True, fastmath=False, error_model="numpy")
+def _orientation_bin_table(table, n_bins, bins):
+    """bins[i] and bins[len(table) + i]: gradHist's bin of the angle table[i], and of
+    table[i] + pi (a negative y-gradient), in its float32 arithmetic."""
+    bins_per_radian = np.float32(n_bins) / (np.float32(2.0) * _PI)
+    for i in range(bins.size):
+        angle = table[i % table.size] + (_PI if i >= table.size else np.float32(0.0))
+        bin_index = int(angle * bins_per_radian + _HALF)
+        bins[i] = 0 if bin_index >= n_bins else bin_index
+
+
+@lru_cache(maxsize=8)
+def orientation_bins(n_orients: int) -> np.ndarray:
+    """The contrast-sensitive bin (of 2 n_orients) of each acos-table entry, read-only: entry
+    i for a non-negative y-gradient, len(acos_table()) + i for a negative one. The per-pixel
+    angle arithmetic done once per entry: the kernel reads a byte instead."""
+    bins = np.empty(4 * _ACOS_OFFSET, np.uint8 if n_orients <= 127 else np.int64)
+    _orientation_bin_table(acos_table(), 2 * n_orients, bins)
+    bins.flags.writeable = False
+    return bins
+
+
+@njit(cache=True, nogil=True, fastmath=False, error_model="numpy")
 def _bin_coordinates(n_pixels, cell):
     """Per pixel: left/top cell index (-1 before the first centre) and fractional offset.
 
@@ -137,17 +159,18 @@ def _row_gradients(plane, y, gx, gy):
 
 
 @njit(cache=True, nogil=True, fastmath=False, error_model="numpy")
-def _gradient_histogram(planes, cell, n_bins, table, hist):
+def _gradient_histogram(planes, cell, n_bins, bins, hist):
     """gradMag (full orientation) + gradHist(softBin=-1): bilinear in space, hard in angle.
 
-    `planes` is float32 (C, H, W). Row by row in small vectorisable passes, branch-free where the
-    data decide (random gradient signs would defeat branch prediction).
+    `planes` is float32 (C, H, W), `bins` `orientation_bins(n_bins // 2)`, `hist` C-contiguous.
+    Row by row in small vectorisable passes, branch-free where the data decide (random gradient
+    signs would defeat branch prediction); the scatter indexes the flat histogram with unsigned
+    indices (no negative-index wraparound code per access).
     """
     channels = planes.shape[0]
     hb, wb = hist.shape[0], hist.shape[1]
     rows, cols = hb * cell, wb * cell
     inv_cell2 = _ONE / np.float32(cell) / np.float32(cell)
-    bins_per_radian = np.float32(n_bins) / (np.float32(2.0) * _PI)
     unit = np.float32(_ACOS_STEPS)
     zero = np.float32(0.0)
     x_first, x_frac = _bin_coordinates(cols, cell)
@@ -158,9 +181,10 @@ def _gradient_histogram(planes, cell, n_bins, table, hist):
     channel_gx = np.empty(cols, np.float32)
     channel_gy = np.empty(cols, np.float32)
     table_index = np.empty(cols, np.uint32)
-    angle_offset = np.empty(cols, np.float32)
     weight = np.empty(cols, np.float32)
     orient = np.empty(cols, np.int64)
+    flat = hist.reshape(-1)
+    row_size = wb * n_bins
     for y in range(rows):
         _row_gradients(planes[0], y, gx, gy)
         for x in range(cols):
@@ -179,17 +203,17 @@ def _gradient_histogram(planes, cell, n_bins, table, hist):
             inverse = min(_ONE / magnitude, _ZERO_GRADIENT_INVERSE)
             negative = gy[x] < zero
             # acos of the unit x-gradient, sign-flipped for negative y, via the toolbox's table;
-            # adding pi below maps the angle to [0, 2 pi). (atan2 would differ at bin edges only.)
+            # `bins` adds pi for negative y (its second half), mapping the angle to [0, 2 pi),
+            # and rounds it to a bin. (atan2 would differ at bin edges only.)
             sign = _MINUS_ONE if negative else _ONE
-            table_index[x] = np.int32(gx[x] * inverse * unit * sign) + _ACOS_OFFSET
-            angle_offset[x] = _PI if negative else zero
+            index = np.int32(gx[x] * inverse * unit * sign) + _ACOS_OFFSET
+            table_index[x] = index + (2 * _ACOS_OFFSET if negative else 0)
             weight[x] = magnitude * inv_cell2
         for x in range(cols):
-            angle = table[table_index[x]] + angle_offset[x]
-            bin_index = int(angle * bins_per_radian + _HALF)
-            orient[x] = 0 if bin_index >= n_bins else bin_index
+            orient[x] = bins[table_index[x]]
         y0 = y_first[y]
         yd = y_frac[y]
+        top = y0 * row_size  # flat index of hist[y0, 0, 0]
         for x in range(cols):
             m = weight[x]
             o = orient[x]
@@ -202,23 +226,24 @@ def _gradient_histogram(planes, cell, n_bins, table, hist):
             w11 = xyd
             has_left = x0 >= 0
             has_right = x0 < wb - 1
+            at = top + x0 * n_bins + o  # hist[y0, x0, o]; the right cell is n_bins further
             if y0 < 0:  # leading rows: only the cell row below the first centre line
                 if has_left:
-                    hist[0, x0, o] += w10 * m
+                    flat[np.uint64(at + row_size)] += w10 * m
                 if has_right:
-                    hist[0, x0 + 1, o] += w11 * m
+                    flat[np.uint64(at + row_size + n_bins)] += w11 * m
             elif y0 < hb - 1:
                 if has_left:
-                    hist[y0, x0, o] += w00 * m
-                    hist[y0 + 1, x0, o] += w10 * m
+                    flat[np.uint64(at)] += w00 * m
+                    flat[np.uint64(at + row_size)] += w10 * m
                 if has_right:
-                    hist[y0, x0 + 1, o] += w01 * m
-                    hist[y0 + 1, x0 + 1, o] += w11 * m
+                    flat[np.uint64(at + n_bins)] += w01 * m
+                    flat[np.uint64(at + row_size + n_bins)] += w11 * m
             else:  # final rows: no cell row below
                 if has_left:
-                    hist[y0, x0, o] += w00 * m
+                    flat[np.uint64(at)] += w00 * m
                 if has_right:
-                    hist[y0, x0 + 1, o] += w01 * m
+                    flat[np.uint64(at + n_bins)] += w01 * m
     # Border cells only receive 7/8 of an interior cell's weight (gradHist, softBin odd).
     for o in range(n_bins):
         for y in range(hb):
@@ -294,7 +319,7 @@ def _normalised_row(by_channel, o, norm, y, clip, weights, out, sums, texture):
 
 
 @njit(cache=True, nogil=True, fastmath=False, error_model="numpy")
-def _fhog_into(image, cell, n_orients, clip, table, weights, out):
+def _fhog_into(image, cell, n_orients, clip, bins, weights, out):
     """fhog of one (H, W, C) image, each cell's values times `weights[y, x]`, into `out`
     (>= 3n+4, H//cell, W//cell), channel-first, any strides (a channel-first slice of a
     transform's input buffer, or a transposed view of a channel-last array); channels past
@@ -310,7 +335,7 @@ def _fhog_into(image, cell, n_orients, clip, table, weights, out):
         return
     n_bins = 2 * n_orients
     sensitive = np.zeros((hb, wb, n_bins), np.float32)
-    _gradient_histogram(_planar_float32(image), cell, n_bins, table, sensitive)
+    _gradient_histogram(_planar_float32(image), cell, n_bins, bins, sensitive)
     insensitive = np.empty((hb, wb, n_orients), np.float32)
     for y in range(hb):
         for x in range(wb):
@@ -337,7 +362,7 @@ def _fhog_into(image, cell, n_orients, clip, table, weights, out):
 
 
 @njit(cache=True, nogil=True, fastmath=False, error_model="numpy")
-def _fhog_batch_into(images, cell, n_orients, clip, table, sample_weights, out):
+def _fhog_batch_into(images, cell, n_orients, clip, bins, sample_weights, out):
     """`_fhog_into` of each image into `out` (N, H//cell, W//cell, C), channel-last, all of
     image i's values times `sample_weights[i]` (channels `_fhog_into` leaves stay zero)."""
     count, rows, cols, channels = out.shape
@@ -345,7 +370,7 @@ def _fhog_batch_into(images, cell, n_orients, clip, table, sample_weights, out):
     channel_first = np.zeros((channels, rows, cols), np.float32)
     for i in range(count):
         weights[:] = sample_weights[i]
-        _fhog_into(images[i], cell, n_orients, clip, table, weights, channel_first)
+        _fhog_into(images[i], cell, n_orients, clip, bins, weights, channel_first)
         target = out[i]
         for y in range(rows):
             for x in range(cols):
@@ -400,13 +425,13 @@ def fhog(
         (height // cell_size, width // cell_size, fhog_channels(n_orients)), dtype=np.float32
     )
     weights = np.ones(out.shape[:2], np.float32)
-    table = acos_table()
+    bins = orientation_bins(int(n_orients))
     _fhog_into(
         pixels,
         int(cell_size),
         int(n_orients),
         np.float32(clip),
-        table,
+        bins,
         weights,
         out.transpose(2, 0, 1),
     )
@@ -434,8 +459,8 @@ def fhog_weighted_into(
             f"fhog of a {pixels.shape[0]} x {pixels.shape[1]} image at cell {cell_size} needs "
             f"weights {cells} and out {shape}, got {weights.shape} and {out.shape}"
         )
-    table = acos_table()
-    _fhog_into(pixels, int(cell_size), int(n_orients), np.float32(clip), table, weights, out)
+    bins = orientation_bins(int(n_orients))
+    _fhog_into(pixels, int(cell_size), int(n_orients), np.float32(clip), bins, weights, out)
 
 
 def fhog_batch(
@@ -468,6 +493,6 @@ def fhog_batch(
             raise InputError(f"fhog_batch needs {count} sample weights, got {weights.shape}")
         channels -= FHOG_TRUNCATION_CHANNELS
     out = np.empty((count, height // cell_size, width // cell_size, channels), np.float32)
-    table = acos_table()
-    _fhog_batch_into(pixels, int(cell_size), int(n_orients), np.float32(clip), table, weights, out)
+    bins = orientation_bins(int(n_orients))
+    _fhog_batch_into(pixels, int(cell_size), int(n_orients), np.float32(clip), bins, weights, out)
     return out
