@@ -162,13 +162,14 @@ def _row_gradients(plane, y, gx, gy):
 def _gradient_histogram(planes, cell, n_bins, bins, hist):
     """gradMag (full orientation) + gradHist(softBin=-1): bilinear in space, hard in angle.
 
-    `planes` is float32 (C, H, W), `bins` `orientation_bins(n_bins // 2)`, `hist` C-contiguous.
+    `planes` is float32 (C, H, W), `bins` `orientation_bins(n_bins // 2)`, `hist` C-contiguous
+    (>= n_bins, hb, wb), channel-major: a pixel's right cell is the next float, not n_bins on.
     Row by row in small vectorisable passes, branch-free where the data decide (random gradient
     signs would defeat branch prediction); the scatter indexes the flat histogram with unsigned
     indices (no negative-index wraparound code per access).
     """
     channels = planes.shape[0]
-    hb, wb = hist.shape[0], hist.shape[1]
+    hb, wb = hist.shape[1], hist.shape[2]
     rows, cols = hb * cell, wb * cell
     inv_cell2 = _ONE / np.float32(cell) / np.float32(cell)
     unit = np.float32(_ACOS_STEPS)
@@ -184,7 +185,7 @@ def _gradient_histogram(planes, cell, n_bins, bins, hist):
     weight = np.empty(cols, np.float32)
     orient = np.empty(cols, np.int64)
     flat = hist.reshape(-1)
-    row_size = wb * n_bins
+    plane = hb * wb
     for y in range(rows):
         _row_gradients(planes[0], y, gx, gy)
         for x in range(cols):
@@ -210,10 +211,10 @@ def _gradient_histogram(planes, cell, n_bins, bins, hist):
             table_index[x] = index + (2 * _ACOS_OFFSET if negative else 0)
             weight[x] = magnitude * inv_cell2
         for x in range(cols):
-            orient[x] = bins[table_index[x]]
+            orient[x] = np.int64(bins[table_index[x]]) * plane
         y0 = y_first[y]
         yd = y_frac[y]
-        top = y0 * row_size  # flat index of hist[y0, 0, 0]
+        top = y0 * wb  # flat index of hist[0, y0, 0]
         for x in range(cols):
             m = weight[x]
             o = orient[x]
@@ -226,34 +227,34 @@ def _gradient_histogram(planes, cell, n_bins, bins, hist):
             w11 = xyd
             has_left = x0 >= 0
             has_right = x0 < wb - 1
-            at = top + x0 * n_bins + o  # hist[y0, x0, o]; the right cell is n_bins further
+            at = top + x0 + o  # hist[o, y0, x0] (o: the bin's plane offset); right cell: + 1
             if y0 < 0:  # leading rows: only the cell row below the first centre line
                 if has_left:
-                    flat[np.uint64(at + row_size)] += w10 * m
+                    flat[np.uint64(at + wb)] += w10 * m
                 if has_right:
-                    flat[np.uint64(at + row_size + n_bins)] += w11 * m
+                    flat[np.uint64(at + wb + 1)] += w11 * m
             elif y0 < hb - 1:
                 if has_left:
                     flat[np.uint64(at)] += w00 * m
-                    flat[np.uint64(at + row_size)] += w10 * m
+                    flat[np.uint64(at + wb)] += w10 * m
                 if has_right:
-                    flat[np.uint64(at + n_bins)] += w01 * m
-                    flat[np.uint64(at + row_size + n_bins)] += w11 * m
+                    flat[np.uint64(at + 1)] += w01 * m
+                    flat[np.uint64(at + wb + 1)] += w11 * m
             else:  # final rows: no cell row below
                 if has_left:
                     flat[np.uint64(at)] += w00 * m
                 if has_right:
-                    flat[np.uint64(at + n_bins)] += w01 * m
+                    flat[np.uint64(at + 1)] += w01 * m
     # Border cells only receive 7/8 of an interior cell's weight (gradHist, softBin odd).
     for o in range(n_bins):
         for y in range(hb):
-            hist[y, 0, o] *= _BORDER_GAIN
+            hist[o, y, 0] *= _BORDER_GAIN
         for x in range(wb):
-            hist[0, x, o] *= _BORDER_GAIN
+            hist[o, 0, x] *= _BORDER_GAIN
         for y in range(hb):
-            hist[y, wb - 1, o] *= _BORDER_GAIN
+            hist[o, y, wb - 1] *= _BORDER_GAIN
         for x in range(wb):
-            hist[hb - 1, x, o] *= _BORDER_GAIN
+            hist[o, hb - 1, x] *= _BORDER_GAIN
 
 
 @njit(cache=True, nogil=True, fastmath=False, error_model="numpy")
@@ -264,12 +265,12 @@ def _block_normalisers(insensitive, cell):
     the C code's order, which matters only when hb or wb is 1 (then raw energies leak through,
     as in the toolbox).
     """
-    hb, wb, n_orients = insensitive.shape
+    n_orients, hb, wb = insensitive.shape
     norm = np.zeros((hb + 1, wb + 1), np.float32)
     for o in range(n_orients):
         for y in range(hb):
             for x in range(wb):
-                value = insensitive[y, x, o]
+                value = insensitive[o, y, x]
                 norm[y + 1, x + 1] += value * value
     eps = np.float32(1e-4) / np.float32(4.0)
     for _ in range(4):
@@ -303,8 +304,8 @@ def _normalised_row(by_channel, o, norm, y, clip, weights, out, sums, texture):
     `texture`, the clipped values times the texture weight are added to `sums` (4, cols).
     Inlined, with plain indexing and no array views: a call or a view per row costs reference
     counting, which on the scale filter's 6 x 4-cell samples was most of the time."""
-    for x in range(by_channel.shape[1]):
-        r = by_channel[o, x]
+    for x in range(by_channel.shape[2]):
+        r = by_channel[o, y, x]
         # The four blocks containing cell (y, x): hogChannels' GETT(0), (1), (hb1), (hb1+1).
         t0 = min(r * norm[y + 1, x + 1], clip)
         t1 = min(r * norm[y, x + 1], clip)
@@ -334,28 +335,24 @@ def _fhog_into(image, cell, n_orients, clip, bins, weights, out):
     if hb == 0 or wb == 0:
         return
     n_bins = 2 * n_orients
-    sensitive = np.zeros((hb, wb, n_bins), np.float32)
-    _gradient_histogram(_planar_float32(image), cell, n_bins, bins, sensitive)
-    insensitive = np.empty((hb, wb, n_orients), np.float32)
-    for y in range(hb):
-        for x in range(wb):
-            for o in range(n_orients):
-                insensitive[y, x, o] = sensitive[y, x, o] + sensitive[y, x, o + n_orients]
-    norm = _block_normalisers(insensitive, cell)
+    # The 2n sensitive bins then the n insensitive ones, channel-major (one plane per bin).
+    bins_by_channel = np.zeros((n_bins + n_orients, hb, wb), np.float32)
+    _gradient_histogram(_planar_float32(image), cell, n_bins, bins, bins_by_channel)
+    for o in range(n_orients):
+        for y in range(hb):
+            for x in range(wb):
+                bins_by_channel[n_bins + o, y, x] = (
+                    bins_by_channel[o, y, x] + bins_by_channel[o + n_orients, y, x]
+                )
+    norm = _block_normalisers(bins_by_channel[n_bins:], cell)
     texture_first = 3 * n_orients
-    by_channel = np.empty((n_bins + n_orients, wb), np.float32)  # one cell row, channel-major
     sums = np.empty((4, wb), np.float32)
     for y in range(hb):
-        for x in range(wb):
-            for o in range(n_bins):
-                by_channel[o, x] = sensitive[y, x, o]
-            for o in range(n_orients):
-                by_channel[n_bins + o, x] = insensitive[y, x, o]
         for k in range(4):
             for x in range(wb):
                 sums[k, x] = 0.0
         for o in range(n_bins + n_orients):
-            _normalised_row(by_channel, o, norm, y, clip, weights, out, sums, o < n_bins)
+            _normalised_row(bins_by_channel, o, norm, y, clip, weights, out, sums, o < n_bins)
         for k in range(4):
             for x in range(wb):
                 out[texture_first + k, y, x] = sums[k, x] * weights[y, x]
