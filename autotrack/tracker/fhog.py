@@ -299,11 +299,12 @@ def _block_normalisers(insensitive, cell):
 
 @njit(cache=True, nogil=True, fastmath=False, error_model="numpy", inline="always")
 def _normalised_row(by_channel, o, norm, y, clip, weights, out, sums, texture):
-    """Cell row y of orientation channel o (hogChannels): the mean of each cell's value under
-    its four block normalisers, each clipped, times `weights`, into `out[o, y]`; with
-    `texture`, the clipped values times the texture weight are added to `sums` (4, cols).
-    Inlined, with plain indexing and no array views: a call or a view per row costs reference
-    counting, which on the scale filter's 6 x 4-cell samples was most of the time."""
+    """Cell row y of orientation channel o (hogChannels) of `by_channel` (channels, hb, wb): the
+    mean of each cell's value under its four block normalisers, each clipped, times `weights`,
+    into `out[o, y]`; with `texture`, the clipped values times the texture weight are added to
+    `sums` (4, cols). Inlined, with plain indexing and no array views: a call or a view per row
+    costs reference counting, which on the scale filter's 6 x 4-cell samples was most of the
+    time."""
     for x in range(by_channel.shape[2]):
         r = by_channel[o, y, x]
         # The four blocks containing cell (y, x): hogChannels' GETT(0), (1), (hb1), (hb1+1).
