@@ -134,34 +134,62 @@ def grey_feature(patch: np.ndarray, cell_size: int) -> np.ndarray:
 
 
 @njit(cache=True, nogil=True, fastmath=False, error_model="numpy")
+def _band_indices(patch, row, cell, index):
+    """Table rows R//8 + 32 (G//8) + 1024 (B//8) of the pixels of cell row `row`, (cell, width)."""
+    width = index.shape[1]
+    for dy in range(cell):
+        line = patch[row * cell + dy]
+        target = index[dy]
+        for x in range(width):
+            target[x] = (
+                (np.int64(line[x, 0]) >> 3)
+                + ((np.int64(line[x, 1]) >> 3) << 5)
+                + ((np.int64(line[x, 2]) >> 3) << 10)
+            )
+
+
+@njit(cache=True, nogil=True, fastmath=False, error_model="numpy")
 def _lookup_cell_average(patch, table, cell, weights, out):
     """Cell means of table[R//8 + 32 (G//8) + 1024 (B//8)] over an RGB uint8 patch, each cell's
-    mean times `weights[row, col]` (rounded once after the mean), into `out` of any strides."""
+    mean times `weights[row, col]` (rounded once after the mean), into `out` of any strides.
+
+    Each cell's sum runs over its pixels row by row, left to right, in float32 from zero; with
+    the tables' 10 channels the ten sums stay in registers (no array views, no stores between
+    the additions)."""
     rows, cols, depth = out.shape
-    width = cols * cell
-    index = np.empty(width, np.int64)
-    accumulator = np.zeros((cols, depth), np.float32)
+    index = np.empty((cell, cols * cell), np.int64)
     scale = np.float32(1.0) / np.float32(cell * cell)
+    zero = np.float32(0.0)
     for row in range(rows):
-        accumulator[:] = 0.0
-        for y in range(row * cell, (row + 1) * cell):
-            line = patch[y]
-            for x in range(width):
-                index[x] = (
-                    (np.int64(line[x, 0]) >> 3)
-                    + ((np.int64(line[x, 1]) >> 3) << 5)
-                    + ((np.int64(line[x, 2]) >> 3) << 10)
-                )
-            for col in range(cols):
-                target = accumulator[col]
-                for dx in range(cell):
-                    source = table[index[col * cell + dx]]
-                    for k in range(depth):
-                        target[k] += source[k]
+        _band_indices(patch, row, cell, index)
         for col in range(cols):
             weight = weights[row, col]
-            for k in range(depth):
-                out[row, col, k] = (accumulator[col, k] * scale) * weight
+            first = col * cell
+            if depth == 10:
+                s0 = s1 = s2 = s3 = s4 = s5 = s6 = s7 = s8 = s9 = zero
+                for dy in range(cell):
+                    for dx in range(first, first + cell):
+                        i = index[dy, dx]
+                        s0 += table[i, 0]
+                        s1 += table[i, 1]
+                        s2 += table[i, 2]
+                        s3 += table[i, 3]
+                        s4 += table[i, 4]
+                        s5 += table[i, 5]
+                        s6 += table[i, 6]
+                        s7 += table[i, 7]
+                        s8 += table[i, 8]
+                        s9 += table[i, 9]
+                sums = (s0, s1, s2, s3, s4, s5, s6, s7, s8, s9)
+                for k in range(10):
+                    out[row, col, k] = (sums[k] * scale) * weight
+            else:
+                for k in range(depth):
+                    total = zero
+                    for dy in range(cell):
+                        for dx in range(first, first + cell):
+                            total += table[index[dy, dx], k]
+                    out[row, col, k] = (total * scale) * weight
 
 
 def _as_rgb_uint8(patch: np.ndarray) -> np.ndarray:

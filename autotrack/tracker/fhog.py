@@ -72,6 +72,28 @@ def acos_table() -> np.ndarray:
 
 
 @njit(cache=True, nogil=True, fastmath=False, error_model="numpy")
+def _orientation_bin_table(table, n_bins, bins):
+    """bins[i] and bins[len(table) + i]: gradHist's bin of the angle table[i], and of
+    table[i] + pi (a negative y-gradient), in its float32 arithmetic."""
+    bins_per_radian = np.float32(n_bins) / (np.float32(2.0) * _PI)
+    for i in range(bins.size):
+        angle = table[i % table.size] + (_PI if i >= table.size else np.float32(0.0))
+        bin_index = int(angle * bins_per_radian + _HALF)
+        bins[i] = 0 if bin_index >= n_bins else bin_index
+
+
+@lru_cache(maxsize=8)
+def orientation_bins(n_orients: int) -> np.ndarray:
+    """The contrast-sensitive bin (of 2 n_orients) of each acos-table entry, read-only: entry
+    i for a non-negative y-gradient, len(acos_table()) + i for a negative one. The per-pixel
+    angle arithmetic done once per entry: the kernel reads a byte instead."""
+    bins = np.empty(4 * _ACOS_OFFSET, np.uint8 if n_orients <= 127 else np.int64)
+    _orientation_bin_table(acos_table(), 2 * n_orients, bins)
+    bins.flags.writeable = False
+    return bins
+
+
+@njit(cache=True, nogil=True, fastmath=False, error_model="numpy")
 def _bin_coordinates(n_pixels, cell):
     """Per pixel: left/top cell index (-1 before the first centre) and fractional offset.
 
@@ -137,17 +159,19 @@ def _row_gradients(plane, y, gx, gy):
 
 
 @njit(cache=True, nogil=True, fastmath=False, error_model="numpy")
-def _gradient_histogram(planes, cell, n_bins, table, hist):
+def _gradient_histogram(planes, cell, n_bins, bins, hist):
     """gradMag (full orientation) + gradHist(softBin=-1): bilinear in space, hard in angle.
 
-    `planes` is float32 (C, H, W). Row by row in small vectorisable passes, branch-free where the
-    data decide (random gradient signs would defeat branch prediction).
+    `planes` is float32 (C, H, W), `bins` `orientation_bins(n_bins // 2)`, `hist` C-contiguous
+    (>= n_bins, hb, wb), channel-major: a pixel's right cell is the next float, not n_bins on.
+    Row by row in small vectorisable passes, branch-free where the data decide (random gradient
+    signs would defeat branch prediction); the scatter indexes the flat histogram with unsigned
+    indices (no negative-index wraparound code per access).
     """
     channels = planes.shape[0]
-    hb, wb = hist.shape[0], hist.shape[1]
+    hb, wb = hist.shape[1], hist.shape[2]
     rows, cols = hb * cell, wb * cell
     inv_cell2 = _ONE / np.float32(cell) / np.float32(cell)
-    bins_per_radian = np.float32(n_bins) / (np.float32(2.0) * _PI)
     unit = np.float32(_ACOS_STEPS)
     zero = np.float32(0.0)
     x_first, x_frac = _bin_coordinates(cols, cell)
@@ -158,9 +182,10 @@ def _gradient_histogram(planes, cell, n_bins, table, hist):
     channel_gx = np.empty(cols, np.float32)
     channel_gy = np.empty(cols, np.float32)
     table_index = np.empty(cols, np.uint32)
-    angle_offset = np.empty(cols, np.float32)
     weight = np.empty(cols, np.float32)
     orient = np.empty(cols, np.int64)
+    flat = hist.reshape(-1)
+    plane = hb * wb
     for y in range(rows):
         _row_gradients(planes[0], y, gx, gy)
         for x in range(cols):
@@ -179,17 +204,17 @@ def _gradient_histogram(planes, cell, n_bins, table, hist):
             inverse = min(_ONE / magnitude, _ZERO_GRADIENT_INVERSE)
             negative = gy[x] < zero
             # acos of the unit x-gradient, sign-flipped for negative y, via the toolbox's table;
-            # adding pi below maps the angle to [0, 2 pi). (atan2 would differ at bin edges only.)
+            # `bins` adds pi for negative y (its second half), mapping the angle to [0, 2 pi),
+            # and rounds it to a bin. (atan2 would differ at bin edges only.)
             sign = _MINUS_ONE if negative else _ONE
-            table_index[x] = np.int32(gx[x] * inverse * unit * sign) + _ACOS_OFFSET
-            angle_offset[x] = _PI if negative else zero
+            index = np.int32(gx[x] * inverse * unit * sign) + _ACOS_OFFSET
+            table_index[x] = index + (2 * _ACOS_OFFSET if negative else 0)
             weight[x] = magnitude * inv_cell2
         for x in range(cols):
-            angle = table[table_index[x]] + angle_offset[x]
-            bin_index = int(angle * bins_per_radian + _HALF)
-            orient[x] = 0 if bin_index >= n_bins else bin_index
+            orient[x] = np.int64(bins[table_index[x]]) * plane
         y0 = y_first[y]
         yd = y_frac[y]
+        top = y0 * wb  # flat index of hist[0, y0, 0]
         for x in range(cols):
             m = weight[x]
             o = orient[x]
@@ -202,33 +227,34 @@ def _gradient_histogram(planes, cell, n_bins, table, hist):
             w11 = xyd
             has_left = x0 >= 0
             has_right = x0 < wb - 1
+            at = top + x0 + o  # hist[o, y0, x0] (o: the bin's plane offset); right cell: + 1
             if y0 < 0:  # leading rows: only the cell row below the first centre line
                 if has_left:
-                    hist[0, x0, o] += w10 * m
+                    flat[np.uint64(at + wb)] += w10 * m
                 if has_right:
-                    hist[0, x0 + 1, o] += w11 * m
+                    flat[np.uint64(at + wb + 1)] += w11 * m
             elif y0 < hb - 1:
                 if has_left:
-                    hist[y0, x0, o] += w00 * m
-                    hist[y0 + 1, x0, o] += w10 * m
+                    flat[np.uint64(at)] += w00 * m
+                    flat[np.uint64(at + wb)] += w10 * m
                 if has_right:
-                    hist[y0, x0 + 1, o] += w01 * m
-                    hist[y0 + 1, x0 + 1, o] += w11 * m
+                    flat[np.uint64(at + 1)] += w01 * m
+                    flat[np.uint64(at + wb + 1)] += w11 * m
             else:  # final rows: no cell row below
                 if has_left:
-                    hist[y0, x0, o] += w00 * m
+                    flat[np.uint64(at)] += w00 * m
                 if has_right:
-                    hist[y0, x0 + 1, o] += w01 * m
+                    flat[np.uint64(at + 1)] += w01 * m
     # Border cells only receive 7/8 of an interior cell's weight (gradHist, softBin odd).
     for o in range(n_bins):
         for y in range(hb):
-            hist[y, 0, o] *= _BORDER_GAIN
+            hist[o, y, 0] *= _BORDER_GAIN
         for x in range(wb):
-            hist[0, x, o] *= _BORDER_GAIN
+            hist[o, 0, x] *= _BORDER_GAIN
         for y in range(hb):
-            hist[y, wb - 1, o] *= _BORDER_GAIN
+            hist[o, y, wb - 1] *= _BORDER_GAIN
         for x in range(wb):
-            hist[hb - 1, x, o] *= _BORDER_GAIN
+            hist[o, hb - 1, x] *= _BORDER_GAIN
 
 
 @njit(cache=True, nogil=True, fastmath=False, error_model="numpy")
@@ -239,12 +265,12 @@ def _block_normalisers(insensitive, cell):
     the C code's order, which matters only when hb or wb is 1 (then raw energies leak through,
     as in the toolbox).
     """
-    hb, wb, n_orients = insensitive.shape
+    n_orients, hb, wb = insensitive.shape
     norm = np.zeros((hb + 1, wb + 1), np.float32)
     for o in range(n_orients):
         for y in range(hb):
             for x in range(wb):
-                value = insensitive[y, x, o]
+                value = insensitive[o, y, x]
                 norm[y + 1, x + 1] += value * value
     eps = np.float32(1e-4) / np.float32(4.0)
     for _ in range(4):
@@ -273,13 +299,14 @@ def _block_normalisers(insensitive, cell):
 
 @njit(cache=True, nogil=True, fastmath=False, error_model="numpy", inline="always")
 def _normalised_row(by_channel, o, norm, y, clip, weights, out, sums, texture):
-    """Cell row y of orientation channel o (hogChannels): the mean of each cell's value under
-    its four block normalisers, each clipped, times `weights`, into `out[o, y]`; with
-    `texture`, the clipped values times the texture weight are added to `sums` (4, cols).
-    Inlined, with plain indexing and no array views: a call or a view per row costs reference
-    counting, which on the scale filter's 6 x 4-cell samples was most of the time."""
-    for x in range(by_channel.shape[1]):
-        r = by_channel[o, x]
+    """Cell row y of orientation channel o (hogChannels) of `by_channel` (channels, hb, wb): the
+    mean of each cell's value under its four block normalisers, each clipped, times `weights`,
+    into `out[o, y]`; with `texture`, the clipped values times the texture weight are added to
+    `sums` (4, cols). Inlined, with plain indexing and no array views: a call or a view per row
+    costs reference counting, which on the scale filter's 6 x 4-cell samples was most of the
+    time."""
+    for x in range(by_channel.shape[2]):
+        r = by_channel[o, y, x]
         # The four blocks containing cell (y, x): hogChannels' GETT(0), (1), (hb1), (hb1+1).
         t0 = min(r * norm[y + 1, x + 1], clip)
         t1 = min(r * norm[y, x + 1], clip)
@@ -294,7 +321,7 @@ def _normalised_row(by_channel, o, norm, y, clip, weights, out, sums, texture):
 
 
 @njit(cache=True, nogil=True, fastmath=False, error_model="numpy")
-def _fhog_into(image, cell, n_orients, clip, table, weights, out):
+def _fhog_into(image, cell, n_orients, clip, bins, weights, out):
     """fhog of one (H, W, C) image, each cell's values times `weights[y, x]`, into `out`
     (>= 3n+4, H//cell, W//cell), channel-first, any strides (a channel-first slice of a
     transform's input buffer, or a transposed view of a channel-last array); channels past
@@ -309,35 +336,31 @@ def _fhog_into(image, cell, n_orients, clip, table, weights, out):
     if hb == 0 or wb == 0:
         return
     n_bins = 2 * n_orients
-    sensitive = np.zeros((hb, wb, n_bins), np.float32)
-    _gradient_histogram(_planar_float32(image), cell, n_bins, table, sensitive)
-    insensitive = np.empty((hb, wb, n_orients), np.float32)
-    for y in range(hb):
-        for x in range(wb):
-            for o in range(n_orients):
-                insensitive[y, x, o] = sensitive[y, x, o] + sensitive[y, x, o + n_orients]
-    norm = _block_normalisers(insensitive, cell)
+    # The 2n sensitive bins then the n insensitive ones, channel-major (one plane per bin).
+    bins_by_channel = np.zeros((n_bins + n_orients, hb, wb), np.float32)
+    _gradient_histogram(_planar_float32(image), cell, n_bins, bins, bins_by_channel)
+    for o in range(n_orients):
+        for y in range(hb):
+            for x in range(wb):
+                bins_by_channel[n_bins + o, y, x] = (
+                    bins_by_channel[o, y, x] + bins_by_channel[o + n_orients, y, x]
+                )
+    norm = _block_normalisers(bins_by_channel[n_bins:], cell)
     texture_first = 3 * n_orients
-    by_channel = np.empty((n_bins + n_orients, wb), np.float32)  # one cell row, channel-major
     sums = np.empty((4, wb), np.float32)
     for y in range(hb):
-        for x in range(wb):
-            for o in range(n_bins):
-                by_channel[o, x] = sensitive[y, x, o]
-            for o in range(n_orients):
-                by_channel[n_bins + o, x] = insensitive[y, x, o]
         for k in range(4):
             for x in range(wb):
                 sums[k, x] = 0.0
         for o in range(n_bins + n_orients):
-            _normalised_row(by_channel, o, norm, y, clip, weights, out, sums, o < n_bins)
+            _normalised_row(bins_by_channel, o, norm, y, clip, weights, out, sums, o < n_bins)
         for k in range(4):
             for x in range(wb):
                 out[texture_first + k, y, x] = sums[k, x] * weights[y, x]
 
 
 @njit(cache=True, nogil=True, fastmath=False, error_model="numpy")
-def _fhog_batch_into(images, cell, n_orients, clip, table, sample_weights, out):
+def _fhog_batch_into(images, cell, n_orients, clip, bins, sample_weights, out):
     """`_fhog_into` of each image into `out` (N, H//cell, W//cell, C), channel-last, all of
     image i's values times `sample_weights[i]` (channels `_fhog_into` leaves stay zero)."""
     count, rows, cols, channels = out.shape
@@ -345,7 +368,7 @@ def _fhog_batch_into(images, cell, n_orients, clip, table, sample_weights, out):
     channel_first = np.zeros((channels, rows, cols), np.float32)
     for i in range(count):
         weights[:] = sample_weights[i]
-        _fhog_into(images[i], cell, n_orients, clip, table, weights, channel_first)
+        _fhog_into(images[i], cell, n_orients, clip, bins, weights, channel_first)
         target = out[i]
         for y in range(rows):
             for x in range(cols):
@@ -400,13 +423,13 @@ def fhog(
         (height // cell_size, width // cell_size, fhog_channels(n_orients)), dtype=np.float32
     )
     weights = np.ones(out.shape[:2], np.float32)
-    table = acos_table()
+    bins = orientation_bins(int(n_orients))
     _fhog_into(
         pixels,
         int(cell_size),
         int(n_orients),
         np.float32(clip),
-        table,
+        bins,
         weights,
         out.transpose(2, 0, 1),
     )
@@ -434,8 +457,8 @@ def fhog_weighted_into(
             f"fhog of a {pixels.shape[0]} x {pixels.shape[1]} image at cell {cell_size} needs "
             f"weights {cells} and out {shape}, got {weights.shape} and {out.shape}"
         )
-    table = acos_table()
-    _fhog_into(pixels, int(cell_size), int(n_orients), np.float32(clip), table, weights, out)
+    bins = orientation_bins(int(n_orients))
+    _fhog_into(pixels, int(cell_size), int(n_orients), np.float32(clip), bins, weights, out)
 
 
 def fhog_batch(
@@ -468,6 +491,6 @@ def fhog_batch(
             raise InputError(f"fhog_batch needs {count} sample weights, got {weights.shape}")
         channels -= FHOG_TRUNCATION_CHANNELS
     out = np.empty((count, height // cell_size, width // cell_size, channels), np.float32)
-    table = acos_table()
-    _fhog_batch_into(pixels, int(cell_size), int(n_orients), np.float32(clip), table, weights, out)
+    bins = orientation_bins(int(n_orients))
+    _fhog_batch_into(pixels, int(cell_size), int(n_orients), np.float32(clip), bins, weights, out)
     return out
