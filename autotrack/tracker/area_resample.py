@@ -201,10 +201,12 @@ def _area_samples(image, tops, lefts, heights, widths, out):
 def _padded_row_taps(x_src, x_weight, x_offsets, left, width, channels):
     """The horizontal taps of every output element of a row, padded to one count.
 
-    Tap j of output element i (= dx * channels + c) reads element `index[j, i]` of the source
+    Tap j of output element i (= dx * channels + c) reads element `offsets[j, i]` of the source
     row's span `[start, stop)` (flattened row, channels interleaved, columns clamped into the
     image) with weight `weight[j, i]`. Elements with fewer taps get weight 0 on a pixel of their
-    own: the float32 sum then adds +0, which leaves it as it is (every sum is >= +0).
+    own: the float32 sum then adds +0, which leaves it as it is (every sum is >= +0). The offsets
+    are unsigned so that numba indexes with them without its negative-index test, which kept
+    the gather loop 1.1-1.3x slower.
     """
     dst_w = x_offsets.shape[0] - 1
     taps = 0
@@ -223,10 +225,11 @@ def _padded_row_taps(x_src, x_weight, x_offsets, left, width, channels):
                     weight[j, dx * channels + c] = x_weight[k]
     start = index.min()
     stop = index.max() + 1
+    offsets = np.empty((taps, dst_w * channels), np.uint32)  # unsigned: no wraparound test
     for j in range(taps):
         for i in range(dst_w * channels):
-            index[j, i] -= start
-    return index, weight, start, stop
+            offsets[j, i] = index[j, i] - start
+    return offsets, weight, start, stop
 
 
 @njit(cache=True, nogil=True, fastmath=False, error_model="numpy")
