@@ -118,10 +118,10 @@ def _transposed_region(image, top, left, rows, cols):
     """
     height, width, channels = image.shape
     region = np.empty((channels, cols, rows), np.float32)
-    column_index = np.empty(cols, np.int64)
+    column_index = np.empty(cols, np.uint64)  # unsigned: no negative-index test when indexing
     for q in range(cols):
         column_index[q] = min(max(left + q, 0), width - 1)
-    row_index = np.empty(rows, np.int64)
+    row_index = np.empty(rows, np.uint64)
     for r in range(rows):
         row_index[r] = min(max(top + r, 0), height - 1)
     block = 16  # rows per pass: reads stay in a few cache lines, writes are contiguous runs
@@ -137,24 +137,35 @@ def _transposed_region(image, top, left, rows, cols):
 
 
 @njit(cache=True, nogil=True, fastmath=False, error_model="numpy")
-def _area_from_region(region, row0, col0, src_h, src_w, out):
-    """ResizeArea_Invoker on the src_h x src_w crop at (row0, col0) of a transposed region."""
+def _region_buffers(channels, max_h, max_w, dst_h, dst_w):
+    """Scratch arrays of `_area_from_region` for crops up to max_h x max_w: allocated once for
+    all the crops of a call (x taps, y taps, a column's sums, the row-major sums, a row)."""
+    return (
+        np.empty(2 * max_w + 2, np.int64),
+        np.empty(2 * max_w + 2, np.float32),
+        np.empty(dst_w + 1, np.int64),
+        np.empty(2 * max_h + 2, np.int64),
+        np.empty(2 * max_h + 2, np.float32),
+        np.empty(dst_h + 1, np.int64),
+        np.empty(max_h, np.float32),
+        np.empty((channels, max_h, dst_w), np.float32),
+        np.empty(dst_w, np.float32),
+    )
+
+
+@njit(cache=True, nogil=True, fastmath=False, error_model="numpy")
+def _area_from_region(region, row0, col0, src_h, src_w, out, buffers):
+    """ResizeArea_Invoker on the src_h x src_w crop at (row0, col0) of a transposed region,
+    with the scratch arrays of `_region_buffers`."""
     channels = region.shape[0]
     dst_h, dst_w = out.shape[0], out.shape[1]
-    x_src = np.empty(2 * src_w + 2, np.int64)
-    x_weight = np.empty(2 * src_w + 2, np.float32)
-    x_offsets = np.empty(dst_w + 1, np.int64)
-    y_src = np.empty(2 * src_h + 2, np.int64)
-    y_weight = np.empty(2 * src_h + 2, np.float32)
-    y_offsets = np.empty(dst_h + 1, np.int64)
+    x_src, x_weight, x_offsets, y_src, y_weight, y_offsets, acc, by_row, total = buffers
     _area_taps(src_w, dst_w, x_src, x_weight, x_offsets)
     _area_taps(src_h, dst_h, y_src, y_weight, y_offsets)
     # Horizontal pass, for every source row at once: buf = sum over x taps of S * alpha, one
     # output column at a time along the (contiguous) source rows, kept row-major for the
     # vertical pass, which then runs along whole output rows (vectorised); every element
     # still takes its taps in OpenCV's order.
-    acc = np.empty(src_h, np.float32)
-    by_row = np.empty((channels, src_h, dst_w), np.float32)
     for c in range(channels):
         for dx in range(dst_w):
             k = x_offsets[dx]
@@ -171,7 +182,6 @@ def _area_from_region(region, row0, col0, src_h, src_w, out):
             for r in range(src_h):
                 rows[r, dx] = acc[r]
     # Vertical pass: sum over y taps of beta * buf, then saturate_cast<uchar> (half to even).
-    total = np.empty(dst_w, np.float32)
     for dy in range(dst_h):
         first, last = y_offsets[dy], y_offsets[dy + 1]
         for c in range(channels):
@@ -189,12 +199,18 @@ def _area_from_region(region, row0, col0, src_h, src_w, out):
 
 @njit(cache=True, nogil=True, fastmath=False, error_model="numpy")
 def _area_samples(image, tops, lefts, heights, widths, out):
-    """All crops from one transposed copy of their bounding box (they overlap heavily)."""
+    """All crops from one transposed copy of their bounding box (they overlap heavily), with one
+    set of scratch arrays."""
     top, left = tops.min(), lefts.min()
     bottom, right = (tops + heights).max(), (lefts + widths).max()
     region = _transposed_region(image, top, left, bottom - top, right - left)
+    buffers = _region_buffers(
+        region.shape[0], heights.max(), widths.max(), out.shape[1], out.shape[2]
+    )
     for i in range(tops.shape[0]):
-        _area_from_region(region, tops[i] - top, lefts[i] - left, heights[i], widths[i], out[i])
+        _area_from_region(
+            region, tops[i] - top, lefts[i] - left, heights[i], widths[i], out[i], buffers
+        )
 
 
 @njit(cache=True, nogil=True, fastmath=False, error_model="numpy")
