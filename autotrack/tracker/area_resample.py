@@ -136,10 +136,34 @@ def _transposed_region(image, top, left, rows, cols):
     return region
 
 
+@njit(cache=True, nogil=True, fastmath=False, error_model="numpy", inline="always")
+def _vertical_pass(horizontal, y_src, y_weight, y_offsets, out, total):
+    """ResizeArea_Invoker's vertical pass: out[dy] = saturate_cast<uchar> (half to even) of the
+    sum over y taps of beta * horizontal[y] (rows of dst_w * channels interleaved sums), the
+    taps in OpenCV's order, vectorised along the row; `total` holds one row."""
+    row_width = out.shape[1] * out.shape[2]
+    for dy in range(out.shape[0]):
+        first = y_offsets[dy]
+        source = horizontal[y_src[first]]
+        beta = y_weight[first]
+        for i in range(row_width):
+            total[i] = beta * source[i]
+        for j in range(first + 1, y_offsets[dy + 1]):
+            source = horizontal[y_src[j]]
+            beta = y_weight[j]
+            for i in range(row_width):
+                total[i] = total[i] + beta * source[i]
+        row = out[dy].reshape(row_width)
+        for i in range(row_width):
+            value = np.rint(total[i])
+            row[i] = np.uint8(min(max(value, np.float32(0.0)), np.float32(255.0)))
+
+
 @njit(cache=True, nogil=True, fastmath=False, error_model="numpy")
 def _region_buffers(channels, max_h, max_w, dst_h, dst_w):
     """Scratch arrays of `_area_from_region` for crops up to max_h x max_w: allocated once for
-    all the crops of a call (x taps, y taps, a column's sums, the row-major sums, a row)."""
+    all the crops of a call (x taps, y taps, a column's sums, the row-major sums with channels
+    interleaved, an output row)."""
     return (
         np.empty(2 * max_w + 2, np.int64),
         np.empty(2 * max_w + 2, np.float32),
@@ -148,8 +172,8 @@ def _region_buffers(channels, max_h, max_w, dst_h, dst_w):
         np.empty(2 * max_h + 2, np.float32),
         np.empty(dst_h + 1, np.int64),
         np.empty(max_h, np.float32),
-        np.empty((channels, max_h, dst_w), np.float32),
-        np.empty(dst_w, np.float32),
+        np.empty((max_h, dst_w * channels), np.float32),
+        np.empty(dst_w * channels, np.float32),
     )
 
 
@@ -163,9 +187,9 @@ def _area_from_region(region, row0, col0, src_h, src_w, out, buffers):
     _area_taps(src_w, dst_w, x_src, x_weight, x_offsets)
     _area_taps(src_h, dst_h, y_src, y_weight, y_offsets)
     # Horizontal pass, for every source row at once: buf = sum over x taps of S * alpha, one
-    # output column at a time along the (contiguous) source rows, kept row-major for the
-    # vertical pass, which then runs along whole output rows (vectorised); every element
-    # still takes its taps in OpenCV's order.
+    # output column at a time along the (contiguous) source rows, kept row-major with the
+    # channels interleaved for the vertical pass, which then runs along whole output rows
+    # (vectorised, all channels at once); every element still takes its taps in OpenCV's order.
     for c in range(channels):
         for dx in range(dst_w):
             k = x_offsets[dx]
@@ -178,23 +202,10 @@ def _area_from_region(region, row0, col0, src_h, src_w, out, buffers):
                 alpha = x_weight[k]
                 for r in range(src_h):
                     acc[r] = acc[r] + column[r] * alpha
-            rows = by_row[c]
+            element = dx * channels + c
             for r in range(src_h):
-                rows[r, dx] = acc[r]
-    # Vertical pass: sum over y taps of beta * buf, then saturate_cast<uchar> (half to even).
-    for dy in range(dst_h):
-        first, last = y_offsets[dy], y_offsets[dy + 1]
-        for c in range(channels):
-            source, beta = by_row[c, y_src[first]], y_weight[first]
-            for dx in range(dst_w):
-                total[dx] = beta * source[dx]
-            for j in range(first + 1, last):
-                source, beta = by_row[c, y_src[j]], y_weight[j]
-                for dx in range(dst_w):
-                    total[dx] = total[dx] + beta * source[dx]
-            for dx in range(dst_w):
-                value = np.rint(total[dx])
-                out[dy, dx, c] = np.uint8(min(max(value, np.float32(0.0)), np.float32(255.0)))
+                by_row[r, element] = acc[r]
+    _vertical_pass(by_row, y_src, y_weight, y_offsets, out, total)
 
 
 @njit(cache=True, nogil=True, fastmath=False, error_model="numpy")
@@ -303,22 +314,7 @@ def _area_crop(image, top, left, src_h, src_w, out):
         for q in range(stop - start):
             span[q] = np.float32(pixels[q])
         _gathered_row_sums(span, index, weight, horizontal[r])
-    total = np.empty(row_width, np.float32)
-    for dy in range(dst_h):
-        first = y_offsets[dy]
-        source = horizontal[y_src[first]]
-        beta = y_weight[first]
-        for i in range(row_width):
-            total[i] = beta * source[i]
-        for j in range(first + 1, y_offsets[dy + 1]):
-            source = horizontal[y_src[j]]
-            beta = y_weight[j]
-            for i in range(row_width):
-                total[i] = total[i] + beta * source[i]
-        row = out[dy].reshape(row_width)
-        for i in range(row_width):
-            value = np.rint(total[i])
-            row[i] = np.uint8(min(max(value, np.float32(0.0)), np.float32(255.0)))
+    _vertical_pass(horizontal, y_src, y_weight, y_offsets, out, np.empty(row_width, np.float32))
 
 
 def _kernel_pixels(image: np.ndarray, bounds: Callable[[], tuple[int, int, int, int]]):
