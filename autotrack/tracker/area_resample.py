@@ -263,26 +263,38 @@ def _padded_row_taps(x_src, x_weight, x_offsets, left, width, channels):
 def _gathered_row_sums(span, offsets, weight, target):
     """target[i] = sum over taps j of span[offsets[j, i]] * weight[j, i], taken in tap order.
 
-    Two taps a pass over the row: the running sum is loaded and stored half as often, and every
-    element still takes ((s0 a0 + s1 a1) + s2 a2) + s3 a3, OpenCV's sequence of float32 steps.
+    Up to four taps in the first pass over the row and two a pass after it: the running sum is
+    stored once for the usual 2-4 taps, and every element still takes
+    (((s0 a0 + s1 a1) + s2 a2) + s3 a3) + ..., OpenCV's sequence of float32 steps.
     """
     taps, row_width = offsets.shape
-    first, alpha = offsets[0], weight[0]
+    o0, a0 = offsets[0], weight[0]
     if taps == 1:
         for i in range(row_width):
-            target[i] = span[first[i]] * alpha[i]
+            target[i] = span[o0[i]] * a0[i]
         return
-    second, beta = offsets[1], weight[1]
+    o1, a1 = offsets[1], weight[1]
+    if taps == 2:
+        for i in range(row_width):
+            target[i] = span[o0[i]] * a0[i] + span[o1[i]] * a1[i]
+        return
+    o2, a2 = offsets[2], weight[2]
+    if taps == 3:
+        for i in range(row_width):
+            target[i] = (span[o0[i]] * a0[i] + span[o1[i]] * a1[i]) + span[o2[i]] * a2[i]
+        return
+    o3, a3 = offsets[3], weight[3]
     for i in range(row_width):
-        target[i] = span[first[i]] * alpha[i] + span[second[i]] * beta[i]
-    for j in range(2, taps - 1, 2):
-        first, alpha, second, beta = offsets[j], weight[j], offsets[j + 1], weight[j + 1]
+        pair = span[o0[i]] * a0[i] + span[o1[i]] * a1[i]
+        target[i] = (pair + span[o2[i]] * a2[i]) + span[o3[i]] * a3[i]
+    for j in range(4, taps - 1, 2):
+        o0, a0, o1, a1 = offsets[j], weight[j], offsets[j + 1], weight[j + 1]
         for i in range(row_width):
-            target[i] = (target[i] + span[first[i]] * alpha[i]) + span[second[i]] * beta[i]
-    if taps % 2 == 1:
-        first, alpha = offsets[taps - 1], weight[taps - 1]
+            target[i] = (target[i] + span[o0[i]] * a0[i]) + span[o1[i]] * a1[i]
+    if taps > 4 and taps % 2 == 1:
+        o0, a0 = offsets[taps - 1], weight[taps - 1]
         for i in range(row_width):
-            target[i] = target[i] + span[first[i]] * alpha[i]
+            target[i] = target[i] + span[o0[i]] * a0[i]
 
 
 @njit(cache=True, nogil=True, fastmath=False, error_model="numpy")
