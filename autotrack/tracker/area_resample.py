@@ -302,9 +302,10 @@ def _area_crop(image, top, left, src_h, src_w, out):
     """One large crop: ResizeArea_Invoker in the image's own (row, col, channel) layout.
 
     Each source row's horizontal sums are computed once (OpenCV recomputes a row shared by two
-    output rows, with the same result), tap by tap over the whole output row so the compiler
-    vectorises them (gathers from the row converted to float32 once); the vertical pass then
-    runs vectorised along the row.
+    output rows, with the same result), up to four taps a pass over the whole output row
+    (scalar gathers from the row converted to float32 once: `_gathered_row_sums`); the vertical
+    pass then runs vectorised along the row. Transposing rows into SIMD lanes to avoid the
+    gathers was measured slower (docs/benchmarks.md, ninth round).
     """
     height, width, channels = image.shape
     dst_h, dst_w = out.shape[0], out.shape[1]
