@@ -142,6 +142,7 @@ def _vertical_pass(horizontal, y_src, y_weight, y_offsets, out, total):
     sum over y taps of beta * horizontal[y] (rows of dst_w * channels interleaved sums), the
     taps in OpenCV's order, vectorised along the row; `total` holds one row."""
     row_width = out.shape[1] * out.shape[2]
+    rows_out = out.reshape(out.shape[0], row_width)
     for dy in range(out.shape[0]):
         first = y_offsets[dy]
         source = horizontal[y_src[first]]
@@ -153,7 +154,7 @@ def _vertical_pass(horizontal, y_src, y_weight, y_offsets, out, total):
             beta = y_weight[j]
             for i in range(row_width):
                 total[i] = total[i] + beta * source[i]
-        row = out[dy].reshape(row_width)
+        row = rows_out[dy]
         for i in range(row_width):
             value = np.rint(total[i])
             row[i] = np.uint8(min(max(value, np.float32(0.0)), np.float32(255.0)))
