@@ -128,3 +128,54 @@ def test_strided_frames_give_the_same_samples():
                 area_resize_crops(view, [top, top + 9], [left, left + 5], sizes, (25, 19)),
                 area_resize_crops(copy, [top, top + 9], [left, left + 5], sizes, (25, 19)),
             )
+
+
+def _tap_count(src: int, dst: int) -> int:
+    """The most horizontal taps an output element of a src -> dst shrink takes (OpenCV's table)."""
+    from autotrack.tracker.area_resample import _area_taps
+
+    first = np.empty(2 * src + 2, np.int64)
+    weights = np.empty(2 * src + 2, np.float32)
+    offsets = np.empty(dst + 1, np.int64)
+    _area_taps(src, dst, first, weights, offsets)
+    return int(np.diff(offsets).max())
+
+
+@pytest.mark.parametrize("kind", ["noise", "grey"])
+def test_search_patch_kernel_equals_opencv_for_every_tap_count(kind):
+    """The horizontal pass special-cases 1, 2, 3 and 4 taps and then adds two at a time (an odd
+    one last): every count from 1 (an unchanged width) to 8, 15 and 37 (782 -> 22) matches cv2
+    exactly."""
+    image = np.ascontiguousarray(np.tile(_images()[kind], (4, 3, 1)[: _images()[kind].ndim]))
+    cases = [((150, 200), (101, 200))]  # the width kept: one tap an element
+    cases += [((199, 201), (123, 200)), ((300, 291), (200, 200)), ((291, 446), (200, 200))]
+    cases += [((230, 401), (97, 100)), ((240, 130), (100, 29)), ((130, 540), (61, 101))]
+    cases += [((200, 610), (71, 101)), ((401, 782), (200, 22)), ((64, 129), (31, 9))]
+    counts = set()
+    for size, out in cases:
+        assert area_path_is_generic(size, out)
+        counts.add(_tap_count(size[1], out[1]))
+        for top, left in ((37, 51), (-60, -90), (600, 700)):  # inside, over two borders
+            np.testing.assert_array_equal(
+                area_resize_crop(image, top, left, size, out),
+                _opencv_sample(image, top, left, size, out),
+                err_msg=f"{size} -> {out} at {top},{left}",
+            )
+    assert counts == {1, 2, 3, 4, 5, 6, 7, 8, 15, 37}
+
+
+@pytest.mark.parametrize("kind", ["smooth", "grey"])
+def test_crops_of_mixed_sizes_in_one_call_equal_opencv(kind):
+    """The scale samples' scratch arrays are sized once for the call's largest crop and reused:
+    crops in any order of size (small after large, large after small) stay exact."""
+    image = _images()[kind]
+    rng = np.random.default_rng(13)
+    for out in ((22, 22), (27, 18), (19, 26)):
+        sizes = rng.integers(out[0] + 1, 160, (40, 2))
+        sizes = np.array([size for size in sizes if area_path_is_generic(tuple(size), out)])
+        tops = rng.integers(-60, 200, len(sizes))
+        lefts = rng.integers(-60, 280, len(sizes))
+        got = area_resize_crops(image, tops, lefts, sizes, out)
+        for index, size in enumerate(sizes):
+            expected = _opencv_sample(image, tops[index], lefts[index], tuple(size), out)
+            np.testing.assert_array_equal(got[index], expected)

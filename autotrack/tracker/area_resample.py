@@ -118,10 +118,10 @@ def _transposed_region(image, top, left, rows, cols):
     """
     height, width, channels = image.shape
     region = np.empty((channels, cols, rows), np.float32)
-    column_index = np.empty(cols, np.int64)
+    column_index = np.empty(cols, np.uint64)  # unsigned: no negative-index test when indexing
     for q in range(cols):
         column_index[q] = min(max(left + q, 0), width - 1)
-    row_index = np.empty(rows, np.int64)
+    row_index = np.empty(rows, np.uint64)
     for r in range(rows):
         row_index[r] = min(max(top + r, 0), height - 1)
     block = 16  # rows per pass: reads stay in a few cache lines, writes are contiguous runs
@@ -136,25 +136,61 @@ def _transposed_region(image, top, left, rows, cols):
     return region
 
 
+@njit(cache=True, nogil=True, fastmath=False, error_model="numpy", inline="always")
+def _vertical_pass(horizontal, y_src, y_weight, y_offsets, out, total):
+    """ResizeArea_Invoker's vertical pass: out[dy] = saturate_cast<uchar> (half to even) of the
+    sum over y taps of beta * horizontal[y] (rows of dst_w * channels interleaved sums), the
+    taps in OpenCV's order, vectorised along the row; `total` holds one row."""
+    row_width = out.shape[1] * out.shape[2]
+    rows_out = out.reshape(out.shape[0], row_width)
+    for dy in range(out.shape[0]):
+        first = y_offsets[dy]
+        source = horizontal[y_src[first]]
+        beta = y_weight[first]
+        for i in range(row_width):
+            total[i] = beta * source[i]
+        for j in range(first + 1, y_offsets[dy + 1]):
+            source = horizontal[y_src[j]]
+            beta = y_weight[j]
+            for i in range(row_width):
+                total[i] = total[i] + beta * source[i]
+        row = rows_out[dy]
+        for i in range(row_width):
+            value = np.rint(total[i])
+            row[i] = np.uint8(min(max(value, np.float32(0.0)), np.float32(255.0)))
+
+
 @njit(cache=True, nogil=True, fastmath=False, error_model="numpy")
-def _area_from_region(region, row0, col0, src_h, src_w, out):
-    """ResizeArea_Invoker on the src_h x src_w crop at (row0, col0) of a transposed region."""
+def _region_buffers(channels, max_h, max_w, dst_h, dst_w):
+    """Scratch arrays of `_area_from_region` for crops up to max_h x max_w: allocated once for
+    all the crops of a call (x taps, y taps, a column's sums, the row-major sums with channels
+    interleaved, an output row)."""
+    return (
+        np.empty(2 * max_w + 2, np.int64),
+        np.empty(2 * max_w + 2, np.float32),
+        np.empty(dst_w + 1, np.int64),
+        np.empty(2 * max_h + 2, np.int64),
+        np.empty(2 * max_h + 2, np.float32),
+        np.empty(dst_h + 1, np.int64),
+        np.empty(max_h, np.float32),
+        np.empty((max_h, dst_w * channels), np.float32),
+        np.empty(dst_w * channels, np.float32),
+    )
+
+
+@njit(cache=True, nogil=True, fastmath=False, error_model="numpy")
+def _area_from_region(region, row0, col0, src_h, src_w, out, buffers):
+    """ResizeArea_Invoker on the src_h x src_w crop at (row0, col0) of a transposed region,
+    with the scratch arrays of `_region_buffers`."""
     channels = region.shape[0]
     dst_h, dst_w = out.shape[0], out.shape[1]
-    x_src = np.empty(2 * src_w + 2, np.int64)
-    x_weight = np.empty(2 * src_w + 2, np.float32)
-    x_offsets = np.empty(dst_w + 1, np.int64)
-    y_src = np.empty(2 * src_h + 2, np.int64)
-    y_weight = np.empty(2 * src_h + 2, np.float32)
-    y_offsets = np.empty(dst_h + 1, np.int64)
+    x_src, x_weight, x_offsets, y_src, y_weight, y_offsets, acc, by_row, total = buffers
     _area_taps(src_w, dst_w, x_src, x_weight, x_offsets)
     _area_taps(src_h, dst_h, y_src, y_weight, y_offsets)
     # Horizontal pass, for every source row at once: buf = sum over x taps of S * alpha, one
-    # output column at a time along the (contiguous) source rows, kept row-major for the
-    # vertical pass, which then runs along whole output rows (vectorised); every element
-    # still takes its taps in OpenCV's order.
-    acc = np.empty(src_h, np.float32)
-    by_row = np.empty((channels, src_h, dst_w), np.float32)
+    # output column at a time along the (contiguous) source rows, kept row-major with the
+    # channels interleaved for the vertical pass, which then runs along whole output rows
+    # (vectorised, all channels at once); every element still takes its taps in OpenCV's order.
     for c in range(channels):
         for dx in range(dst_w):
             k = x_offsets[dx]
@@ -167,44 +203,38 @@ def _area_from_region(region, row0, col0, src_h, src_w, out):
                 alpha = x_weight[k]
                 for r in range(src_h):
                     acc[r] = acc[r] + column[r] * alpha
-            rows = by_row[c]
+            element = dx * channels + c
             for r in range(src_h):
-                rows[r, dx] = acc[r]
-    # Vertical pass: sum over y taps of beta * buf, then saturate_cast<uchar> (half to even).
-    total = np.empty(dst_w, np.float32)
-    for dy in range(dst_h):
-        first, last = y_offsets[dy], y_offsets[dy + 1]
-        for c in range(channels):
-            source, beta = by_row[c, y_src[first]], y_weight[first]
-            for dx in range(dst_w):
-                total[dx] = beta * source[dx]
-            for j in range(first + 1, last):
-                source, beta = by_row[c, y_src[j]], y_weight[j]
-                for dx in range(dst_w):
-                    total[dx] = total[dx] + beta * source[dx]
-            for dx in range(dst_w):
-                value = np.rint(total[dx])
-                out[dy, dx, c] = np.uint8(min(max(value, np.float32(0.0)), np.float32(255.0)))
+                by_row[r, element] = acc[r]
+    _vertical_pass(by_row, y_src, y_weight, y_offsets, out, total)
 
 
 @njit(cache=True, nogil=True, fastmath=False, error_model="numpy")
 def _area_samples(image, tops, lefts, heights, widths, out):
-    """All crops from one transposed copy of their bounding box (they overlap heavily)."""
+    """All crops from one transposed copy of their bounding box (they overlap heavily), with one
+    set of scratch arrays."""
     top, left = tops.min(), lefts.min()
     bottom, right = (tops + heights).max(), (lefts + widths).max()
     region = _transposed_region(image, top, left, bottom - top, right - left)
+    buffers = _region_buffers(
+        region.shape[0], heights.max(), widths.max(), out.shape[1], out.shape[2]
+    )
     for i in range(tops.shape[0]):
-        _area_from_region(region, tops[i] - top, lefts[i] - left, heights[i], widths[i], out[i])
+        _area_from_region(
+            region, tops[i] - top, lefts[i] - left, heights[i], widths[i], out[i], buffers
+        )
 
 
 @njit(cache=True, nogil=True, fastmath=False, error_model="numpy")
 def _padded_row_taps(x_src, x_weight, x_offsets, left, width, channels):
     """The horizontal taps of every output element of a row, padded to one count.
 
-    Tap j of output element i (= dx * channels + c) reads element `index[j, i]` of the source
+    Tap j of output element i (= dx * channels + c) reads element `offsets[j, i]` of the source
     row's span `[start, stop)` (flattened row, channels interleaved, columns clamped into the
     image) with weight `weight[j, i]`. Elements with fewer taps get weight 0 on a pixel of their
-    own: the float32 sum then adds +0, which leaves it as it is (every sum is >= +0).
+    own: the float32 sum then adds +0, which leaves it as it is (every sum is >= +0). The offsets
+    are unsigned so that numba indexes with them without its negative-index test, which kept
+    the gather loop 1.1-1.3x slower.
     """
     dst_w = x_offsets.shape[0] - 1
     taps = 0
@@ -223,10 +253,49 @@ def _padded_row_taps(x_src, x_weight, x_offsets, left, width, channels):
                     weight[j, dx * channels + c] = x_weight[k]
     start = index.min()
     stop = index.max() + 1
+    offsets = np.empty((taps, dst_w * channels), np.uint32)  # unsigned: no wraparound test
     for j in range(taps):
         for i in range(dst_w * channels):
-            index[j, i] -= start
-    return index, weight, start, stop
+            offsets[j, i] = index[j, i] - start
+    return offsets, weight, start, stop
+
+
+@njit(cache=True, nogil=True, fastmath=False, error_model="numpy", inline="always")
+def _gathered_row_sums(span, offsets, weight, target):
+    """target[i] = sum over taps j of span[offsets[j, i]] * weight[j, i], taken in tap order.
+
+    Up to four taps in the first pass over the row and two a pass after it: the running sum is
+    stored once for the usual 2-4 taps, and every element still takes
+    (((s0 a0 + s1 a1) + s2 a2) + s3 a3) + ..., OpenCV's sequence of float32 steps.
+    """
+    taps, row_width = offsets.shape
+    o0, a0 = offsets[0], weight[0]
+    if taps == 1:
+        for i in range(row_width):
+            target[i] = span[o0[i]] * a0[i]
+        return
+    o1, a1 = offsets[1], weight[1]
+    if taps == 2:
+        for i in range(row_width):
+            target[i] = span[o0[i]] * a0[i] + span[o1[i]] * a1[i]
+        return
+    o2, a2 = offsets[2], weight[2]
+    if taps == 3:
+        for i in range(row_width):
+            target[i] = (span[o0[i]] * a0[i] + span[o1[i]] * a1[i]) + span[o2[i]] * a2[i]
+        return
+    o3, a3 = offsets[3], weight[3]
+    for i in range(row_width):
+        pair = span[o0[i]] * a0[i] + span[o1[i]] * a1[i]
+        target[i] = (pair + span[o2[i]] * a2[i]) + span[o3[i]] * a3[i]
+    for j in range(4, taps - 1, 2):
+        o0, a0, o1, a1 = offsets[j], weight[j], offsets[j + 1], weight[j + 1]
+        for i in range(row_width):
+            target[i] = (target[i] + span[o0[i]] * a0[i]) + span[o1[i]] * a1[i]
+    if taps > 4 and taps % 2 == 1:
+        o0, a0 = offsets[taps - 1], weight[taps - 1]
+        for i in range(row_width):
+            target[i] = target[i] + span[o0[i]] * a0[i]
 
 
 @njit(cache=True, nogil=True, fastmath=False, error_model="numpy")
@@ -234,9 +303,10 @@ def _area_crop(image, top, left, src_h, src_w, out):
     """One large crop: ResizeArea_Invoker in the image's own (row, col, channel) layout.
 
     Each source row's horizontal sums are computed once (OpenCV recomputes a row shared by two
-    output rows, with the same result), tap by tap over the whole output row so the compiler
-    vectorises them (gathers from the row converted to float32 once); the vertical pass then
-    runs vectorised along the row.
+    output rows, with the same result), up to four taps a pass over the whole output row
+    (scalar gathers from the row converted to float32 once: `_gathered_row_sums`); the vertical
+    pass then runs vectorised along the row. Transposing rows into SIMD lanes to avoid the
+    gathers was measured slower (docs/benchmarks.md, ninth round).
     """
     height, width, channels = image.shape
     dst_h, dst_w = out.shape[0], out.shape[1]
@@ -257,30 +327,8 @@ def _area_crop(image, top, left, src_h, src_w, out):
         pixels = flat[min(max(top + r, 0), height - 1)][start:stop]
         for q in range(stop - start):
             span[q] = np.float32(pixels[q])
-        target = horizontal[r]
-        first_index, first_weight = index[0], weight[0]
-        for i in range(row_width):
-            target[i] = span[first_index[i]] * first_weight[i]
-        for j in range(1, index.shape[0]):
-            tap_index, tap_weight = index[j], weight[j]
-            for i in range(row_width):
-                target[i] = target[i] + span[tap_index[i]] * tap_weight[i]
-    total = np.empty(row_width, np.float32)
-    for dy in range(dst_h):
-        first = y_offsets[dy]
-        source = horizontal[y_src[first]]
-        beta = y_weight[first]
-        for i in range(row_width):
-            total[i] = beta * source[i]
-        for j in range(first + 1, y_offsets[dy + 1]):
-            source = horizontal[y_src[j]]
-            beta = y_weight[j]
-            for i in range(row_width):
-                total[i] = total[i] + beta * source[i]
-        row = out[dy].reshape(row_width)
-        for i in range(row_width):
-            value = np.rint(total[i])
-            row[i] = np.uint8(min(max(value, np.float32(0.0)), np.float32(255.0)))
+        _gathered_row_sums(span, index, weight, horizontal[r])
+    _vertical_pass(horizontal, y_src, y_weight, y_offsets, out, np.empty(row_width, np.float32))
 
 
 def _kernel_pixels(image: np.ndarray, bounds: Callable[[], tuple[int, int, int, int]]):
