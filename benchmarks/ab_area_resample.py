@@ -15,11 +15,9 @@ python benchmarks/ab_area_resample.py HEAD~1 --frames 40 --repeats 9
 
 from __future__ import annotations
 
-import argparse
 import importlib
 import json
 import os
-import subprocess
 import sys
 import tempfile
 import time
@@ -29,7 +27,13 @@ import cv2
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from ab_tracker import BASE_PACKAGE, COLOUR_TABLE, SHARED, extract_revision  # noqa: E402
+from ab_tracker import (  # noqa: E402
+    BASE_PACKAGE,
+    COLOUR_TABLE,
+    SHARED,
+    import_revision,
+    revision_parser,
+)
 from speed import render_multi_sequence  # noqa: E402
 
 DEV_SEQUENCES = (("DTB70", "Surfing06"), ("UAV123_10fps", "boat5"), ("OTB", "Dog1"))
@@ -114,8 +118,7 @@ def compare(calls: list[tuple], modules: tuple, repeats: int) -> None:
 
 
 def main() -> int:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("revision", help="git revision to compare with (e.g. integration3)")
+    parser = revision_parser(__doc__.splitlines()[0])
     parser.add_argument("--frames", type=int, default=40, help="updates per target")
     parser.add_argument("--repeats", type=int, default=7, help="timed replays of each call")
     args = parser.parse_args()
@@ -127,12 +130,8 @@ def main() -> int:
         return 2
     cv2.setNumThreads(1)
     with tempfile.TemporaryDirectory() as folder:
-        try:
-            extract_revision(args.revision, Path(folder))
-        except subprocess.CalledProcessError as error:
-            print(f"cannot read {args.revision}: {error.stderr.decode().strip()}", file=sys.stderr)
+        if not import_revision(args.revision, Path(folder)):
             return 2
-        sys.path.insert(0, folder)
         base = importlib.import_module(f"{BASE_PACKAGE}.tracker.area_resample")
         this = importlib.import_module("autotrack.tracker.area_resample")
         calls = record_calls(args.frames, Path(folder) / "sequence")

@@ -70,6 +70,25 @@ def extract_revision(revision: str, folder: Path) -> None:
         path.write_text(renamed)
 
 
+def import_revision(revision: str, folder: Path) -> bool:
+    """`extract_revision` into `folder` and `folder` on the import path; False (and a message on
+    stderr) when git cannot read the revision."""
+    try:
+        extract_revision(revision, folder)
+    except subprocess.CalledProcessError as error:
+        print(f"cannot read {revision}: {error.stderr.decode().strip()}", file=sys.stderr)
+        return False
+    sys.path.insert(0, str(folder))
+    return True
+
+
+def revision_parser(description: str) -> argparse.ArgumentParser:
+    """An argument parser whose first argument is the git revision to compare with."""
+    parser = argparse.ArgumentParser(description=description)
+    parser.add_argument("revision", help="git revision to compare with (e.g. integration3)")
+    return parser
+
+
 def parse_overrides(text: str) -> dict:
     """`NAME=VALUE,...` as TrackerParams overrides, each value of its field's type."""
     from autotrack.params import TrackerParams
@@ -134,8 +153,7 @@ def compare(base, new, sequence_dir: Path, preset_name: str, frames: int, overri
 
 
 def main() -> int:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("revision", help="git revision to compare with (e.g. integration3)")
+    parser = revision_parser(__doc__.splitlines()[0])
     parser.add_argument("--frames", type=int, default=150, help="updates per sequence")
     parser.add_argument("--preset", default="autotrack")
     parser.add_argument("--this", default="", help="NAME=VALUE,... for this checkout only")
@@ -152,12 +170,8 @@ def main() -> int:
     import autotrack as new
 
     with tempfile.TemporaryDirectory() as folder:
-        try:
-            extract_revision(args.revision, Path(folder))
-        except subprocess.CalledProcessError as error:
-            print(f"cannot read {args.revision}: {error.stderr.decode().strip()}", file=sys.stderr)
+        if not import_revision(args.revision, Path(folder)):
             return 2
-        sys.path.insert(0, folder)
         base = importlib.import_module(BASE_PACKAGE)
         for module in (base, new):  # the revision's kernels compile in its fresh folder: untimed
             warmup = importlib.import_module(f"{module.__name__}.tracker.warmup")

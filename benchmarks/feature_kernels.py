@@ -15,11 +15,9 @@ python benchmarks/feature_kernels.py integration3 [--rounds 40] [--frames 12]
 
 from __future__ import annotations
 
-import argparse
 import importlib
 import json
 import os
-import subprocess
 import sys
 import tempfile
 import time
@@ -29,7 +27,13 @@ import cv2
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from ab_tracker import BASE_PACKAGE, COLOUR_TABLE, SHARED, extract_revision  # noqa: E402
+from ab_tracker import (  # noqa: E402
+    BASE_PACKAGE,
+    COLOUR_TABLE,
+    SHARED,
+    import_revision,
+    revision_parser,
+)
 from speed import render_multi_sequence  # noqa: E402
 
 SEQUENCES = (("DTB70", "Surfing06"), ("UAV123_10fps", "boat5"), ("OTB", "Dog1"))
@@ -129,8 +133,7 @@ def compare(kind: str, entries: list[tuple], base, new, rounds: int) -> str:
 
 
 def main() -> int:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("revision", help="git revision to compare with (e.g. integration3)")
+    parser = revision_parser(__doc__.splitlines()[0])
     parser.add_argument("--rounds", type=int, default=40, help="timed calls per input")
     parser.add_argument("--frames", type=int, default=12, help="updates captured per sequence")
     args = parser.parse_args()
@@ -143,12 +146,8 @@ def main() -> int:
     table = load_colour_table(COLOUR_TABLE)  # C-contiguous, as the tracker holds it
     calls = capture(args.frames)
     with tempfile.TemporaryDirectory() as folder:
-        try:
-            extract_revision(args.revision, Path(folder))
-        except subprocess.CalledProcessError as error:
-            print(f"cannot read {args.revision}: {error.stderr.decode().strip()}", file=sys.stderr)
+        if not import_revision(args.revision, Path(folder)):
             return 2
-        sys.path.insert(0, folder)
         load = os.getloadavg()
         print(f"load average before: {load[0]:.1f} {load[1]:.1f} {load[2]:.1f}")
         for kind, recorded in calls.items():
