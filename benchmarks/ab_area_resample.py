@@ -31,6 +31,7 @@ from ab_tracker import (  # noqa: E402
     BASE_PACKAGE,
     COLOUR_TABLE,
     SHARED,
+    colour_table_present,
     import_revision,
     revision_parser,
 )
@@ -122,8 +123,7 @@ def main() -> int:
     parser.add_argument("--frames", type=int, default=40, help="updates per target")
     parser.add_argument("--repeats", type=int, default=7, help="timed replays of each call")
     args = parser.parse_args()
-    if not COLOUR_TABLE.is_file():
-        print(f"needs {COLOUR_TABLE}", file=sys.stderr)
+    if not colour_table_present():
         return 2
     if args.frames < 1 or args.repeats < 1:
         print("--frames and --repeats must be at least 1", file=sys.stderr)

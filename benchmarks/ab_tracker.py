@@ -82,6 +82,14 @@ def import_revision(revision: str, folder: Path) -> bool:
     return True
 
 
+def colour_table_present() -> bool:
+    """True when the published Color Names table is there; else a message on stderr."""
+    if COLOUR_TABLE.is_file():
+        return True
+    print(f"needs {COLOUR_TABLE}", file=sys.stderr)
+    return False
+
+
 def revision_parser(description: str) -> argparse.ArgumentParser:
     """An argument parser whose first argument is the git revision to compare with."""
     parser = argparse.ArgumentParser(description=description)
@@ -163,8 +171,7 @@ def main() -> int:
     except ValueError as error:
         print(f"--this: {error}", file=sys.stderr)
         return 2
-    if not COLOUR_TABLE.is_file():
-        print(f"needs {COLOUR_TABLE}", file=sys.stderr)
+    if not colour_table_present():
         return 2
     cv2.setNumThreads(1)
     import autotrack as new

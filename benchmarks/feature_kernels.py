@@ -31,6 +31,7 @@ from ab_tracker import (  # noqa: E402
     BASE_PACKAGE,
     COLOUR_TABLE,
     SHARED,
+    colour_table_present,
     import_revision,
     revision_parser,
 )
@@ -137,8 +138,7 @@ def main() -> int:
     parser.add_argument("--rounds", type=int, default=40, help="timed calls per input")
     parser.add_argument("--frames", type=int, default=12, help="updates captured per sequence")
     args = parser.parse_args()
-    if not COLOUR_TABLE.is_file():
-        print(f"needs {COLOUR_TABLE}", file=sys.stderr)
+    if not colour_table_present():
         return 2
     cv2.setNumThreads(1)
     from autotrack.tracker.features import load_colour_table
