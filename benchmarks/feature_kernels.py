@@ -82,7 +82,7 @@ def capture(frames: int) -> dict[str, list[tuple]]:
                 tracker.update(image)
         where[0] = "rendered"
         with tempfile.TemporaryDirectory() as folder:
-            rendered = render_multi_sequence(Path(folder), frames)
+            rendered = render_multi_sequence(Path(folder), frames + 1)
             scene = load_scene(rendered / "scene.json")
             boxes = json.loads((rendered / "boxes.json").read_text())
             with open_frames(rendered) as source:
@@ -139,6 +139,9 @@ def main() -> int:
     parser.add_argument("--frames", type=int, default=12, help="updates captured per sequence")
     args = parser.parse_args()
     if not colour_table_present():
+        return 2
+    if args.frames < 1 or args.rounds < 1:
+        print("--frames and --rounds must be at least 1", file=sys.stderr)
         return 2
     cv2.setNumThreads(1)
     from autotrack.tracker.features import load_colour_table
