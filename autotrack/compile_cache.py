@@ -9,6 +9,8 @@
   any module, or another numba, gives a new folder and a fresh compile (~10 s once); the
   second process of the same sources loads instead of recompiling. The three newest such
   folders are kept, and any other that nothing wrote to in the last hour is removed.
+  $NUMBA_CACHE_DIR is process-wide: another library's numba kernels in the same process are
+  cached in that folder too (numba has no per-package setting).
 
 - arrays that take tens of milliseconds to compute and never change for a given source and
   numpy (the 'lab11' colour table) are kept as `.npy` files by `cached_array`.
