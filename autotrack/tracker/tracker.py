@@ -88,6 +88,7 @@ class AutoTrack:
         window_side = math.sqrt(float(np.prod(self.base_target_size * p.search_area_scale)))
         self.window_size = np.full(2, float(dcf.matlab_round(window_side / cell) * cell))
         self.grid_size = (int(self.window_size[0] // cell), int(self.window_size[1] // cell))
+        self._region_key: tuple[float, float, float] | None = None  # _search_region's cache
         region_size = np.floor(self.base_target_size / cell).astype(int)
         self.region_size = (max(int(region_size[0]), 1), max(int(region_size[1]), 1))
 
@@ -368,9 +369,18 @@ class AutoTrack:
 
     def _sampler(self, image: np.ndarray) -> rotation.TurnedSampler:
         """This frame's search region at the current position and scale, at any angle."""
-        region = dcf.matlab_round(self.window_size * self.scale).astype(int)
+        rows, cols = self._search_region()
         output = (int(self.window_size[0]), int(self.window_size[1]))
-        return rotation.TurnedSampler(image, self.position, (region[0], region[1]), output)
+        return rotation.TurnedSampler(image, self.position, (int(rows), int(cols)), output)
+
+    def _search_region(self) -> tuple[float, float]:
+        """matlab_round(window_size * scale) as (rows, cols) floats, recomputed only when the
+        scale (or, after `init`, the window) changes: both `_search_box` and `_sampler` ask."""
+        key = (self.scale, self.window_size[0], self.window_size[1])
+        if key != self._region_key:
+            rows, cols = dcf.matlab_round(self.window_size * self.scale)
+            self._region, self._region_key = (float(rows), float(cols)), key
+        return self._region
 
     def _spectrum(self, patch: np.ndarray) -> np.ndarray:
         """The windowed feature spectrum of a search patch."""
@@ -457,11 +467,11 @@ class AutoTrack:
         )
 
     def _search_box(self) -> tuple[float, float, float, float]:
-        region = dcf.matlab_round(self.window_size * self.scale)
+        rows, cols = self._search_region()
         row, col = self.position
-        top = math.floor(row) - int(region[0]) // 2
-        left = math.floor(col) - int(region[1]) // 2
-        return (float(left), float(top), float(region[1]), float(region[0]))
+        top = math.floor(row) - int(rows) // 2
+        left = math.floor(col) - int(cols) // 2
+        return (float(left), float(top), cols, rows)
 
     def _relative_scale(self) -> float:
         return float(self.scale / self.initial_scale)
