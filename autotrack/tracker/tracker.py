@@ -35,6 +35,9 @@ class AutoTrack:
     RGB (or grey) uint8 arrays; boxes are 0-based (x, y, w, h) pixels.
     """
 
+    # _search_region's cache: its key holds the scale and the window, which `init` sets anew
+    _region_key: tuple[float, float, float] | None = None
+
     def __init__(self, params: TrackerParams | None = None, colour_table: np.ndarray | None = None):
         self.params = params or TrackerParams()
         if self.params.colour_feature == "table" and colour_table is None:
@@ -88,7 +91,6 @@ class AutoTrack:
         window_side = math.sqrt(float(np.prod(self.base_target_size * p.search_area_scale)))
         self.window_size = np.full(2, float(dcf.matlab_round(window_side / cell) * cell))
         self.grid_size = (int(self.window_size[0] // cell), int(self.window_size[1] // cell))
-        self._region_key: tuple[float, float, float] | None = None  # _search_region's cache
         region_size = np.floor(self.base_target_size / cell).astype(int)
         self.region_size = (max(int(region_size[0]), 1), max(int(region_size[1]), 1))
 
