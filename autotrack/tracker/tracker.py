@@ -35,8 +35,7 @@ class AutoTrack:
     RGB (or grey) uint8 arrays; boxes are 0-based (x, y, w, h) pixels.
     """
 
-    # _search_region's cache: its key holds the scale and the window, which `init` sets anew
-    _region_key: tuple[float, float, float] | None = None
+    _region_key: tuple[float, float, float] | None = None  # _search_region's (scale, window)
 
     def __init__(self, params: TrackerParams | None = None, colour_table: np.ndarray | None = None):
         self.params = params or TrackerParams()
