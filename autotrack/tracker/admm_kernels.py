@@ -47,6 +47,21 @@ def scaled_sum(g_f, l_f, gamma, out):
 
 
 @njit(cache=True, nogil=True, fastmath=False)
+def h_step_gain(window, lambda_spatial, gamma, num_cells, out):
+    """out = T / (lambda u^2 + gamma T), the h-step's per-cell gain (eq. 12), T = num_cells;
+    numpy: (T / (lambda * u**2 + gamma * T)).astype(np.float32) on a float32 window, where the
+    Python scalars act as float32 (lambda, T) and gamma * T is taken in float64 first."""
+    cells = np.float32(num_cells)
+    lam = np.float32(lambda_spatial)
+    penalty = np.float32(gamma * num_cells)
+    rows, cols = window.shape
+    for r in range(rows):
+        for c in range(cols):
+            u = window[r, c]
+            out[r, c] = cells / (lam * (u * u) + penalty)
+
+
+@njit(cache=True, nogil=True, fastmath=False)
 def apply_gain(maps, gain, out):
     """out = maps * gain[None]: the h-step's per-cell gain (eq. 12); numpy: h *= gain."""
     channels, rows, cols = maps.shape
@@ -71,9 +86,10 @@ def update_multiplier(l_f, g_f, h_f, gamma, out):
 class AdmmWorkspace:
     """Buffers of one tracker's ADMM training, reused frame after frame (a tracker trains on one
     thread at a time): all-zero spectra standing for the first iteration's h and multiplier
-    (never written), the multiplier and the per-frequency sum_k |x_k|^2."""
+    (never written), the multiplier, the per-frequency sum_k |x_k|^2 and the h-step's gain."""
 
-    def __init__(self, spectrum_shape: tuple[int, int, int]) -> None:
+    def __init__(self, spectrum_shape: tuple[int, int, int], grid_size: tuple[int, int]) -> None:
         self.zeros = np.zeros(spectrum_shape, np.complex64)
         self.multiplier = np.empty(spectrum_shape, np.complex64)
         self.s_xx = np.empty(spectrum_shape[1:], np.float32)
+        self.gain = np.empty(grid_size, np.float32)

@@ -119,7 +119,9 @@ class SpectrumTransform:
     def workspace(self) -> admm_kernels.AdmmWorkspace:
         """The ADMM training's buffers for spectra of this shape (made on first use)."""
         if self._workspace is None:
-            self._workspace = admm_kernels.AdmmWorkspace(self._spectrum_shape)
+            self._workspace = admm_kernels.AdmmWorkspace(
+                self._spectrum_shape, grid_size=self.grid_size
+            )
         return self._workspace
 
     def project(
@@ -281,7 +283,20 @@ def solve_h_step(
     The result lives in `transform`'s buffer, overwritten by the next h-step.
     """
     num_cells = transform.grid_size[0] * transform.grid_size[1]
-    gain = (num_cells / (lambda_spatial * spatial_window**2 + gamma * num_cells)).astype(np.float32)
+    # Python numbers act as float32 beside a float32 window (numpy scalars would not).
+    scalars = type(lambda_spatial) in (float, int) and type(gamma) in (float, int)
+    if (
+        scalars
+        and spatial_window.dtype == np.float32
+        and spatial_window.shape == transform.grid_size
+    ):
+        gain = transform.workspace().gain  # the numpy expression below, in one compiled pass
+        admm_kernels.h_step_gain(
+            spatial_window, float(lambda_spatial), float(gamma), num_cells, gain
+        )
+    else:
+        gain = num_cells / (lambda_spatial * spatial_window**2 + gamma * num_cells)
+        gain = gain.astype(np.float32)
     return transform.project(g_f, l_f, gamma, gain)
 
 
@@ -432,7 +447,7 @@ def newton_peak(response: np.ndarray, iterations: int) -> tuple[float, float, fl
     """
     rows, cols = response.shape
     response_f = scipy.fft.fft2(response, workers=1).astype(np.complex128)
-    peak_index = int(np.argmax(response))
+    peak_index = int(response.argmax())
     peak_row, peak_col = divmod(peak_index, cols)
     init_score = float(response[peak_row, peak_col])
     row_half = (rows - 1) // 2

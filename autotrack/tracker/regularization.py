@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable
+from functools import lru_cache
 
 import numpy as np
 import scipy.linalg
@@ -113,11 +114,33 @@ def global_variation(variation: np.ndarray) -> float:
     """Global variation eta = ||Pi||_2 * 1e-4, with MATLAB's matrix 2-norm (largest singular value).
 
     Returns inf when Pi has non-finite entries (a numerical blow-up counts as an aberrance).
+    The singular values are `scipy.linalg.svdvals`'s: the same LAPACK routine (gesdd) with the
+    same workspace size on the same float64 matrix, called without svdvals' argument handling.
     """
-    if not np.all(np.isfinite(variation)):
+    if not np.isfinite(variation).all():
         return float("inf")
-    singular_values = scipy.linalg.svdvals(variation.astype(np.float64), check_finite=False)
+    gesdd, lwork = _singular_value_routine(*variation.shape)
+    matrix = np.asfortranarray(variation, dtype=np.float64)  # the copy LAPACK may overwrite
+    _, singular_values, _, info = gesdd(
+        matrix, compute_uv=0, lwork=lwork, full_matrices=1, overwrite_a=1
+    )
+    if info != 0:
+        raise np.linalg.LinAlgError(f"SVD did not converge (gesdd info {info})")
     return float(singular_values[0]) * GLOBAL_VARIATION_SCALE
+
+
+@lru_cache(maxsize=16)
+def _singular_value_routine(rows: int, cols: int):
+    """(gesdd, lwork) as `scipy.linalg.svd(compute_uv=False)` picks them for a float64
+    rows x cols matrix: the routine for that dtype and its optimal workspace size."""
+    probe = np.empty((rows, cols), np.float64)
+    gesdd, gesdd_lwork = scipy.linalg.get_lapack_funcs(
+        ("gesdd", "gesdd_lwork"), (probe,), ilp64="preferred"
+    )
+    work, info = gesdd_lwork(rows, cols, compute_uv=0, full_matrices=1)
+    if info != 0:
+        raise ValueError(f"gesdd_lwork failed for a {rows} x {cols} matrix (info {info})")
+    return gesdd, int(work.real)
 
 
 def temporal_reference(eta: float, zeta: float, nu: float) -> float:

@@ -110,14 +110,12 @@ class ScaleFilter:
     def _extract(
         self, image: np.ndarray, position, scale: float, indices: np.ndarray
     ) -> np.ndarray:
+        every = indices is self._all_indices  # no gathered copies of the steps and window
+        steps = self.scale_steps if every else self.scale_steps[indices]
         patches = scale_patches(
-            image,
-            position,
-            self.base_target_size_hw,
-            scale * self.scale_steps[indices],
-            self.model_size_hw,
+            image, position, self.base_target_size_hw, scale * steps, self.model_size_hw
         )
-        return scale_features(patches, self.window[indices])
+        return scale_features(patches, self.window if every else self.window[indices])
 
     def detect(self, image: np.ndarray, position, scale: float) -> tuple[int, float]:
         """Best scale index and the new (clamped) scale factor."""
@@ -128,10 +126,11 @@ class ScaleFilter:
         _response_spectrum(
             self._numerator, self._denominator, samples_f, self.params.scale_lambda, response_f
         )
-        response = np.real(scipy.fft.ifft(response_f, workers=1))
-        best = int(np.argmax(response))
+        response = scipy.fft.ifft(response_f, workers=1).real
+        best = int(response.argmax())
         new_scale = scale * float(self.scale_steps[best])
-        return best, float(np.clip(new_scale, self.min_scale, self.max_scale))
+        # np.clip's value (a NaN stays NaN) on Python floats
+        return best, float(min(max(new_scale, self.min_scale), self.max_scale))
 
     def _shifted_samples(self, image, position, scale: float, best: int) -> np.ndarray:
         """The release's reuse of the detection samples shifted by the chosen scale index."""

@@ -35,6 +35,8 @@ class AutoTrack:
     RGB (or grey) uint8 arrays; boxes are 0-based (x, y, w, h) pixels.
     """
 
+    _region_key: tuple[float, float, float] | None = None  # _search_region's (scale, window)
+
     def __init__(self, params: TrackerParams | None = None, colour_table: np.ndarray | None = None):
         self.params = params or TrackerParams()
         if self.params.colour_feature == "table" and colour_table is None:
@@ -368,9 +370,18 @@ class AutoTrack:
 
     def _sampler(self, image: np.ndarray) -> rotation.TurnedSampler:
         """This frame's search region at the current position and scale, at any angle."""
-        region = dcf.matlab_round(self.window_size * self.scale).astype(int)
+        rows, cols = self._search_region()
         output = (int(self.window_size[0]), int(self.window_size[1]))
-        return rotation.TurnedSampler(image, self.position, (region[0], region[1]), output)
+        return rotation.TurnedSampler(image, self.position, (int(rows), int(cols)), output)
+
+    def _search_region(self) -> tuple[float, float]:
+        """matlab_round(window_size * scale) as (rows, cols) floats, recomputed only when the
+        scale (or, after `init`, the window) changes: both `_search_box` and `_sampler` ask."""
+        key = (self.scale, self.window_size[0], self.window_size[1])
+        if key != self._region_key:
+            rows, cols = dcf.matlab_round(self.window_size * self.scale)
+            self._region, self._region_key = (float(rows), float(cols)), key
+        return self._region
 
     def _spectrum(self, patch: np.ndarray) -> np.ndarray:
         """The windowed feature spectrum of a search patch."""
@@ -457,11 +468,11 @@ class AutoTrack:
         )
 
     def _search_box(self) -> tuple[float, float, float, float]:
-        region = dcf.matlab_round(self.window_size * self.scale)
+        rows, cols = self._search_region()
         row, col = self.position
-        top = math.floor(row) - int(region[0]) // 2
-        left = math.floor(col) - int(region[1]) // 2
-        return (float(left), float(top), float(region[1]), float(region[0]))
+        top = math.floor(row) - int(rows) // 2
+        left = math.floor(col) - int(cols) // 2
+        return (float(left), float(top), cols, rows)
 
     def _relative_scale(self) -> float:
         return float(self.scale / self.initial_scale)
