@@ -213,8 +213,7 @@ class Pipeline:
             recorder.log_event(kind, frame_index, target_id, **extra)
 
     def close(self) -> None:
-        """Stop the trackers' threads and processes and the frames' read-ahead, finish the
-        recording (readable anyway)."""
+        """Stop the trackers, their processes and the read-ahead; finish the recording."""
         self._groups.close()
         self._frame_cache.close()
         if self._recorder is not None:
