@@ -63,6 +63,14 @@ class TrackResult:
             for values in (self.response_map, self.local_variation, self.spatial_window)
         )
 
+    def renumbered(self, frame_index: int) -> TrackResult:
+        """The same result on frame `frame_index` (a tracker counts its frames from the one
+        it started on; its owner numbers them its own way). Itself when already numbered so:
+        a result is immutable, and the copy is per target and frame."""
+        if self.frame_index == frame_index:
+            return self
+        return replace(self, frame_index=frame_index)
+
     def without_maps(self) -> TrackResult:
         """The same result with its maps dropped (boxes and scalar signals kept): what a long
         run keeps of a frame outside its map window (the session recording has the maps)."""

@@ -199,9 +199,11 @@ class _ThreadRecordingSequence(ImageSequence):
     def __init__(self, paths, name):
         super().__init__(paths, name)
         self.readers: dict[int, str] = {}
+        self.threads: dict[int, threading.Thread] = {}
 
     def read(self, index):
         self.readers[index] = threading.current_thread().name
+        self.threads[index] = threading.current_thread()
         return super().read(index)
 
 
@@ -216,9 +218,28 @@ def test_frame_cache_reads_the_next_image_ahead_in_order(tmp_path):
         np.testing.assert_array_equal(cache.read(index), expected)
     main = threading.current_thread().name
     assert source.readers[0] == source.readers[1] == main
-    assert all(source.readers[k].startswith("prefetch-") for k in range(2, 7))
+    # One read-ahead thread for the whole run, not one per frame.
+    ahead = {source.readers[k] for k in range(2, 6)}
+    assert len(ahead) == 1 and next(iter(ahead)).startswith("prefetch")
     np.testing.assert_array_equal(cache.read(0), cv2.cvtColor(written[0], cv2.COLOR_BGR2RGB))
     assert source.readers[0] == main  # the jump back: no longer cached, read here
+
+
+def test_frame_cache_close_stops_its_read_ahead_thread_and_reads_go_on(tmp_path):
+    written = _write_frames(tmp_path / "seq", 6)
+    source = _ThreadRecordingSequence(sorted((tmp_path / "seq").glob("*.png")), "seq")
+    cache = FrameCache(source, size=2)
+    for index in range(3):
+        cache.read(index)
+    cache.close()
+    reader = source.threads[3]  # read ahead while the caller had frame 2
+    assert reader is not threading.current_thread()
+    assert not reader.is_alive()
+    for index in (3, 4, 5):  # read again, on the caller's thread from now on
+        np.testing.assert_array_equal(
+            cache.read(index), cv2.cvtColor(written[index], cv2.COLOR_BGR2RGB)
+        )
+    assert all(source.threads[k] is threading.current_thread() for k in (3, 4, 5))
 
 
 def test_frame_cache_reports_a_corrupt_frame_read_ahead_as_the_source_does(tmp_path):

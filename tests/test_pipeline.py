@@ -192,3 +192,21 @@ def test_edits_are_checked_before_anything_changes(scene, tmp_path) -> None:
             run.place_box("T9", 0, BOXES["B"])
         assert list(run.targets) == ["T1"]
         assert math.isfinite(run.frame_seconds[0])
+
+
+def test_every_result_carries_its_frame_of_the_sequence_after_restarts(scene, tmp_path) -> None:
+    """A tracker restarted mid-run counts its frames from its restart, a group started later
+    from its first frame: the results (kept and recorded) carry the sequence's frame index."""
+    with _pipeline(scene, tmp_path) as run:
+        run.add_targets(0, {"A": BOXES["A"], "B": BOXES["B"]})
+        run.track_to(4)
+        run.place_box("T1", 4, BOXES["A"])  # a new tracker inside the group at frame 4
+        run.add_target(2, BOXES["C"], "C")  # a group of its own from frame 2
+        run.track_to(8)
+        firsts = {"T1": 0, "T2": 0, "T3": 2}
+        for target_id, first in firsts.items():
+            results = run.targets[target_id].results
+            assert [results[k].frame_index for k in range(first, 9)] == list(range(first, 9))
+        session = open_session(_flushed(run))
+    assert np.isfinite(session.tracks["T3"][2:9]).all()
+    assert not np.isfinite(session.tracks["T3"][:2]).any()

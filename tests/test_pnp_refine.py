@@ -100,3 +100,35 @@ def test_outlier_is_still_rejected_when_a_landmark_is_down_weighted():
         float(pose.excluded_landmarks["D"].split()[1]), math.hypot(40, 15), abs_tol=0.2
     )
     assert np.linalg.norm(pose.position - positions[1]) < 1e-3
+
+
+def _least_squares_refinement(points: np.ndarray, start: np.ndarray) -> np.ndarray:
+    """The refinement as scipy's least_squares(method="lm") states it (before round 10)."""
+    from scipy.optimize import least_squares
+
+    scale = np.repeat(np.sqrt(WEIGHTS), 2)
+    object_points = SCENE.object_points()
+
+    def residuals(params):
+        projected, _ = reprojection(CAMERA, object_points, params[:3], params[3:])
+        return scale * (projected - points).reshape(-1)
+
+    def jacobian(params):
+        return scale[:, None] * reprojection(CAMERA, object_points, params[:3], params[3:])[1]
+
+    return least_squares(
+        residuals, start, jac=jacobian, method="lm", xtol=1e-12, ftol=1e-12, x_scale="jac"
+    ).x
+
+
+def test_weighted_refinement_is_least_squares_lm_bit_for_bit():
+    """MINPACK's lmder through leastsq with least_squares' settings: the same pose to the bit,
+    from good starts and from far ones (which take many steps, some rejected)."""
+    rng = np.random.default_rng(11)
+    for trajectory in ("circle", "figure_eight"):
+        rotations, positions = _poses(trajectory)
+        for frame in range(0, 40, 5):
+            points = _noisy_points(rng, rotations[frame], positions[frame])
+            for start in (_sqpnp(points), _sqpnp(points) + rng.normal(0.0, 0.5, 6)):
+                ours = weighted_refinement(CAMERA, SCENE.object_points(), points, start, WEIGHTS)
+                assert np.array_equal(ours, _least_squares_refinement(points, start))

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from functools import cached_property
 
 import cv2
 import numpy as np
@@ -37,14 +38,29 @@ class CameraIntrinsics:
     """Image height (pixels)."""
 
     def matrix(self) -> np.ndarray:
-        """The 3x3 camera matrix K (float64)."""
-        return np.array(
-            [[self.fx, 0.0, self.cx], [0.0, self.fy, self.cy], [0.0, 0.0, 1.0]], dtype=np.float64
-        )
+        """The 3x3 camera matrix K (float64; read-only, built once per camera: copy it to
+        change it)."""
+        return self._matrix
 
     def distortion_array(self) -> np.ndarray:
-        """Distortion coefficients as a float64 array (length 0 when there is no distortion)."""
-        return np.asarray(self.distortion, dtype=np.float64)
+        """Distortion coefficients as a float64 array (length 0 when there is no distortion;
+        read-only, built once per camera)."""
+        return self._distortion
+
+    @cached_property
+    def _matrix(self) -> np.ndarray:
+        # Every projection and solve of every frame passes K to OpenCV: built once, not per call.
+        matrix = np.array(
+            [[self.fx, 0.0, self.cx], [0.0, self.fy, self.cy], [0.0, 0.0, 1.0]], dtype=np.float64
+        )
+        matrix.flags.writeable = False
+        return matrix
+
+    @cached_property
+    def _distortion(self) -> np.ndarray:
+        distortion = np.array(self.distortion, dtype=np.float64)
+        distortion.flags.writeable = False
+        return distortion
 
     def check_image_size(self, width: int, height: int) -> None:
         """InputError unless this camera is calibrated for `width` x `height` images."""

@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable, Mapping
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -93,7 +93,7 @@ class TrackerGroups:
                 if current is not None:
                     self._leave(target_id, current)
             self._groups.append(_Group(tracker, frame_index, list(fresh)))
-        return {k: _renumbered(results[k], frame_index) for k in boxes}
+        return {k: results[k].renumbered(frame_index) for k in boxes}
 
     def advance(
         self, frame_index: int, previous: int, frame_of: Callable[[int], np.ndarray]
@@ -112,7 +112,7 @@ class TrackerGroups:
         results: dict[str, TrackResult] = {}
         for group in due:
             for target_id, result in group.tracker.update(frame).items():
-                results[target_id] = _renumbered(result, frame_index)
+                results[target_id] = result.renumbered(frame_index)
             group.head = frame_index
         return results, time.perf_counter() - started
 
@@ -140,8 +140,3 @@ class TrackerGroups:
         else:
             group.tracker.close()
             self._groups.remove(group)
-
-
-def _renumbered(result: TrackResult, frame_index: int) -> TrackResult:
-    # A group numbers its frames from the one it started on; results carry the sequence's.
-    return replace(result, frame_index=frame_index)

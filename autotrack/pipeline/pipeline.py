@@ -213,8 +213,9 @@ class Pipeline:
             recorder.log_event(kind, frame_index, target_id, **extra)
 
     def close(self) -> None:
-        """Stop the trackers' threads and processes, finish the recording (readable anyway)."""
+        """Stop the trackers, their processes and the read-ahead; finish the recording."""
         self._groups.close()
+        self._frame_cache.close()
         if self._recorder is not None:
             self._recorder.close()
             self._recorder = None
@@ -272,8 +273,7 @@ class Pipeline:
             self._store(self.targets[target_id], results[target_id])
         self._forget_poses_from(frame_index)
         self._estimate_pose(frame_index)
-        for target_id, (_, landmark) in zip(boxes, entries, strict=True):
-            box = boxes[target_id]
+        for (target_id, box), (_, landmark) in zip(boxes.items(), entries, strict=True):
             self._log_event("box_drawn", frame_index, target_id, box=box, landmark_id=landmark)
         return list(boxes)
 

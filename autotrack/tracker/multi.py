@@ -14,7 +14,6 @@ from __future__ import annotations
 import os
 from collections.abc import Callable, Iterable, Mapping, Sequence
 from concurrent.futures import ThreadPoolExecutor
-from dataclasses import replace
 
 import numpy as np
 
@@ -178,7 +177,7 @@ class MultiTracker:
             child.start(target_id, self._publish(frame, always=True), tuple(box))
             result = _answers(child)[target_id]
         self._owners[target_id] = owner
-        return replace(result, frame_index=self._frame_index)
+        return result.renumbered(self._frame_index)
 
     def _drop(self, target_id: str) -> None:
         owner = self._owners.pop(target_id)
@@ -227,11 +226,8 @@ class MultiTracker:
         finally:
             results_of_children = self._collect_children()
         results.update(results_of_children)
-        return {
-            k: replace(results[k], frame_index=self._frame_index)
-            for k in self._owners
-            if k in results
-        }
+        index = self._frame_index
+        return {k: results[k].renumbered(index) for k in self._owners if k in results}
 
     def _collect_children(self) -> dict[str, TrackResult]:
         """Every pending answer of every child; the first error is raised once all are in."""
