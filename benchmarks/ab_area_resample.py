@@ -23,7 +23,6 @@ import tempfile
 import time
 from pathlib import Path
 
-import cv2
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
@@ -31,8 +30,8 @@ from ab_tracker import (  # noqa: E402
     BASE_PACKAGE,
     COLOUR_TABLE,
     SHARED,
-    colour_table_present,
     import_revision,
+    ready_to_compare,
     revision_parser,
 )
 from speed import render_multi_sequence  # noqa: E402
@@ -123,12 +122,8 @@ def main() -> int:
     parser.add_argument("--frames", type=int, default=40, help="updates per target")
     parser.add_argument("--repeats", type=int, default=7, help="timed replays of each call")
     args = parser.parse_args()
-    if not colour_table_present():
+    if not ready_to_compare(args, "frames", "repeats"):
         return 2
-    if args.frames < 1 or args.repeats < 1:
-        print("--frames and --repeats must be at least 1", file=sys.stderr)
-        return 2
-    cv2.setNumThreads(1)
     with tempfile.TemporaryDirectory() as folder:
         if not import_revision(args.revision, Path(folder)):
             return 2

@@ -82,12 +82,18 @@ def import_revision(revision: str, folder: Path) -> bool:
     return True
 
 
-def colour_table_present() -> bool:
-    """True when the published Color Names table is there; else a message on stderr."""
-    if COLOUR_TABLE.is_file():
-        return True
-    print(f"needs {COLOUR_TABLE}", file=sys.stderr)
-    return False
+def ready_to_compare(args: argparse.Namespace, *counts: str) -> bool:
+    """True when the published Color Names table is there and every option named in `counts`
+    is at least 1; else a message on stderr. Sets OpenCV to one thread, as the tracker runs."""
+    if not COLOUR_TABLE.is_file():
+        print(f"needs {COLOUR_TABLE}", file=sys.stderr)
+        return False
+    if any(getattr(args, name) < 1 for name in counts):
+        names = " and ".join(f"--{name}" for name in counts)
+        print(f"{names} must be at least 1", file=sys.stderr)
+        return False
+    cv2.setNumThreads(1)
+    return True
 
 
 def revision_parser(description: str) -> argparse.ArgumentParser:
@@ -171,9 +177,8 @@ def main() -> int:
     except ValueError as error:
         print(f"--this: {error}", file=sys.stderr)
         return 2
-    if not colour_table_present():
+    if not ready_to_compare(args):
         return 2
-    cv2.setNumThreads(1)
     import autotrack as new
 
     with tempfile.TemporaryDirectory() as folder:

@@ -23,7 +23,6 @@ import tempfile
 import time
 from pathlib import Path
 
-import cv2
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
@@ -31,8 +30,8 @@ from ab_tracker import (  # noqa: E402
     BASE_PACKAGE,
     COLOUR_TABLE,
     SHARED,
-    colour_table_present,
     import_revision,
+    ready_to_compare,
     revision_parser,
 )
 from speed import render_multi_sequence  # noqa: E402
@@ -138,12 +137,8 @@ def main() -> int:
     parser.add_argument("--rounds", type=int, default=40, help="timed calls per input")
     parser.add_argument("--frames", type=int, default=12, help="updates captured per sequence")
     args = parser.parse_args()
-    if not colour_table_present():
+    if not ready_to_compare(args, "frames", "rounds"):
         return 2
-    if args.frames < 1 or args.rounds < 1:
-        print("--frames and --rounds must be at least 1", file=sys.stderr)
-        return 2
-    cv2.setNumThreads(1)
     from autotrack.tracker.features import load_colour_table
 
     table = load_colour_table(COLOUR_TABLE)  # C-contiguous, as the tracker holds it
