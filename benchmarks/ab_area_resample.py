@@ -29,15 +29,13 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from ab_tracker import (  # noqa: E402
     BASE_PACKAGE,
     COLOUR_TABLE,
+    KERNEL_SEQUENCES,
     SHARED,
     import_revision,
     ready_to_compare,
     revision_parser,
 )
 from speed import render_multi_sequence  # noqa: E402
-
-DEV_SEQUENCES = (("DTB70", "Surfing06"), ("UAV123_10fps", "boat5"), ("OTB", "Dog1"))
-"""A small colour target, a large one and a grey sequence."""
 
 
 def record_calls(frames: int, folder: Path) -> list[tuple]:
@@ -70,7 +68,7 @@ def record_calls(frames: int, folder: Path) -> list[tuple]:
     images = [read_image(path) for path in sorted((rendered / "img").iterdir())[: frames + 1]]
     for box in json.loads((rendered / "boxes.json").read_text()).values():
         runs.append(("rendered 1280x720", images, box))
-    for dataset, name in DEV_SEQUENCES:
+    for dataset, name in KERNEL_SEQUENCES:
         sequence = load_otb_sequence(SHARED / "sequences" / dataset / name)[0]
         images = [read_image(path) for path in sequence.frame_paths[: frames + 1]]
         runs.append((name, images, sequence.init_box))

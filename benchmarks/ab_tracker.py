@@ -49,6 +49,8 @@ SEQUENCES = (
     ("DTB70", "Gull1"),
 )
 """Small and large targets, grey and colour frames."""
+KERNEL_SEQUENCES = (("DTB70", "Surfing06"), ("UAV123_10fps", "boat5"), ("OTB", "Dog1"))
+"""The kernel A/Bs' inputs: a small colour target, a large one and a grey sequence."""
 BASE_PACKAGE = "autotrack_base"
 
 

@@ -29,14 +29,13 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from ab_tracker import (  # noqa: E402
     BASE_PACKAGE,
     COLOUR_TABLE,
+    KERNEL_SEQUENCES,
     SHARED,
     import_revision,
     ready_to_compare,
     revision_parser,
 )
 from speed import render_multi_sequence  # noqa: E402
-
-SEQUENCES = (("DTB70", "Surfing06"), ("UAV123_10fps", "boat5"), ("OTB", "Dog1"))
 
 
 def capture(frames: int) -> dict[str, list[tuple]]:
@@ -71,7 +70,7 @@ def capture(frames: int) -> dict[str, list[tuple]]:
         batch,
     )
     try:
-        for dataset, name in SEQUENCES:
+        for dataset, name in KERNEL_SEQUENCES:
             where[0] = name
             sequence = load_otb_sequence(SHARED / "sequences" / dataset / name)[0]
             images = [read_image(path) for path in sequence.frame_paths[: frames + 1]]
