@@ -15,12 +15,29 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from autotrack.io.frames import FrameSource
 from autotrack.params import TrackerParams
 from autotrack.result import TrackResult
 from autotrack.tracker.multi import MultiTracker
 from autotrack.tracker.target_process import WorkerPool
 
 Box = tuple[float, float, float, float]
+
+
+def following_frame(frames: FrameSource, frame_index: int, horizon: int | None) -> int | None:
+    """The frame a pipeline advancing frame by frame up to `horizon` tracks after
+    `frame_index`: None without a horizon, past it or the sequence's end, or when the source
+    does not track that frame right after this one (a live source skips the frames it drops;
+    a live run advances without a horizon)."""
+    following = frame_index + 1
+    if (
+        horizon is None
+        or following > horizon
+        or following >= len(frames)
+        or frames.previous_index(following) != frame_index
+    ):
+        return None
+    return following
 
 
 @dataclass
@@ -96,14 +113,22 @@ class TrackerGroups:
         return {k: results[k].renumbered(frame_index) for k in boxes}
 
     def advance(
-        self, frame_index: int, previous: int, frame_of: Callable[[int], np.ndarray]
+        self,
+        frame_index: int,
+        frames: FrameSource,
+        frame_of: Callable[[int], np.ndarray],
+        horizon: int | None = None,
     ) -> tuple[dict[str, TrackResult], float]:
-        """Track every group whose head is the previous frame (`previous`, usually
-        `frame_index - 1`) onto `frame_index`.
+        """Track every group whose head is the frame before `frame_index` in `frames` (its
+        `previous_index`, usually `frame_index - 1`) onto `frame_index`.
 
-        `frame_of(index)` gives the frame (read only when a group is due). Returns the results
-        and the tracking time in seconds (NaN when no group was due).
+        `frame_of(index)` gives the frame (read only when a group is due). `horizon`: the
+        caller advances frame by frame up to it next; the groups' child processes then start
+        on the next frame at once (`following_frame`, `MultiTracker.speculate`; a frame that
+        cannot be read now is not speculated on, its error comes when it is tracked). Returns
+        the results and the tracking time in seconds (NaN when no group was due).
         """
+        previous = frames.previous_index(frame_index)
         due = [group for group in self._groups if group.head == previous]
         if not due:
             return {}, float("nan")
@@ -114,7 +139,17 @@ class TrackerGroups:
             for target_id, result in group.tracker.update(frame).items():
                 results[target_id] = result.renumbered(frame_index)
             group.head = frame_index
-        return results, time.perf_counter() - started
+        seconds = time.perf_counter() - started
+        following = following_frame(frames, frame_index, horizon)
+        if following is not None:
+            try:
+                next_frame = frame_of(following)
+            except Exception:  # noqa: BLE001 - raised again when that frame is tracked
+                next_frame = None
+            if next_frame is not None:
+                for group in due:
+                    group.tracker.speculate(next_frame)
+        return results, seconds
 
     def remove(self, target_id: str) -> None:
         """Stop tracking a target (nothing when it is not tracked)."""

@@ -349,16 +349,16 @@ class Pipeline:
         """Last frame any target has a result for (-1 without targets)."""
         return max((target.last_frame for target in self.targets.values()), default=-1)
 
-    def advance(self, frame_index: int) -> None:
+    def advance(self, frame_index: int, horizon: int | None = None) -> None:
         """Track every target whose tracker is at the previous frame onto `frame_index`, then
         estimate the pose there if it is not known yet. A growing (live) source's new frames
-        are taken in first; its previous frame is the last one it did not drop."""
+        are taken in first; its previous frame is the last one it did not drop. `horizon`: the
+        caller advances frame by frame up to it next (children start the next frame early)."""
         if frame_index >= self.frame_count:
             self._grow()
         if not 0 < frame_index < self.frame_count:
             return
-        previous = self.frames.previous_index(frame_index)
-        results, seconds = self._groups.advance(frame_index, previous, self.frame)
+        results, seconds = self._groups.advance(frame_index, self.frames, self.frame, horizon)
         if results:
             self.frame_seconds[frame_index] = seconds
             self._embed_frame(frame_index)
@@ -382,7 +382,7 @@ class Pipeline:
         while self._groups and self.tracked_until < frame_index:
             if should_stop is not None and should_stop():
                 return
-            self.advance(self.tracked_until + 1)
+            self.advance(self.tracked_until + 1, horizon=frame_index)
 
     def run(self) -> Iterator[FrameOutcome]:
         """Every frame's outcome from the first frame with a result to the last, tracking the
@@ -393,8 +393,8 @@ class Pipeline:
         if first is None:
             raise InputError("no targets to track: add a box first")
         for frame_index in range(first, self.frame_count):
-            if self._groups and self.tracked_until < frame_index:
-                self.track_to(frame_index)
+            while self._groups and self.tracked_until < frame_index:
+                self.advance(self.tracked_until + 1, horizon=self.frame_count - 1)
             yield self.outcome(frame_index)
 
     def results_at(self, frame_index: int) -> dict[str, TrackResult]:

@@ -7,10 +7,19 @@ with child processes (`processes` > 1: the targets are spread over this process 
 `processes - 1` children, `target_process`, which gives true parallelism where threads
 serialise on the GIL). Every result carries the multi-tracker's frame index, so a target added
 or reset later is numbered like the others.
+
+Speculation (`speculate`): once a frame's results are in, the caller may name the frame the next
+`update` will get; the children start tracking it at once, while this process stores results,
+solves the pose or reads frames, and the next `update` with that frame collects their answers.
+Each child keeps a copy of those trackers first (`target_process`); any other call before that
+update (another frame, init, a target added, reset or removed, close) first puts them back and
+drops the speculative answers, errors included, so every call pattern gives the results of a
+tracker that never speculated, bit for bit.
 """
 
 from __future__ import annotations
 
+import contextlib
 import os
 from collections.abc import Callable, Iterable, Mapping, Sequence
 from concurrent.futures import ThreadPoolExecutor
@@ -20,6 +29,7 @@ import numpy as np
 from autotrack.errors import InputError
 from autotrack.params import TrackerParams
 from autotrack.result import TrackResult
+from autotrack.tracker.speculation import Speculation
 from autotrack.tracker.target_process import SharedFrame, TargetProcess, WorkerPool
 from autotrack.tracker.tracker import AutoTrack
 
@@ -62,6 +72,7 @@ class MultiTracker:
         self._worker_pool = WorkerPool() if self._own_pool else worker_pool
         self._children: list[TargetProcess | None] = [None] * (processes - 1)
         self._shared_frame = SharedFrame() if self._children else None
+        self._speculation: Speculation | None = None
 
     @property
     def target_ids(self) -> tuple[str, ...]:
@@ -89,6 +100,7 @@ class MultiTracker:
             raise InputError(f"initial boxes do not match the targets ({detail})")
         if not boxes:
             raise InputError("no targets to track: give at least one box")
+        self._cancel_speculation()
         frame = _shared_frame(frame)
         for target_id in list(self._owners):
             self._drop(target_id)
@@ -105,6 +117,14 @@ class MultiTracker:
 
     def update(self, frame: np.ndarray) -> dict[str, TrackResult]:
         """Track every target into the next frame."""
+        speculation, self._speculation = self._speculation, None
+        if speculation is not None and speculation.matches(frame):
+            # The children have been tracking this frame since `speculate`.
+            self._frame_index += 1
+            frame = speculation.frame
+            return self._run(lambda _target_id, tracker: tracker.update(frame))
+        self._speculation = speculation
+        self._cancel_speculation()
         if self._frame_index < 0:
             raise InputError("call init(frame, boxes) before update(frame)")
         frame = _shared_frame(frame)
@@ -116,14 +136,38 @@ class MultiTracker:
                 child.update(target_ids, handle)
         return self._run(lambda _target_id, tracker: tracker.update(frame))
 
+    def speculate(self, next_frame: np.ndarray) -> bool:
+        """Start the children's targets on `next_frame`, the frame the next `update` will be
+        given (unchanged, the same array or an equal one): they track it while the caller goes
+        on. Any other call first undoes it. Whether it started (only with a child tracking a
+        target, after `init`, and for a valid frame; an invalid one is reported by `update`)."""
+        self._cancel_speculation()
+        owners = sorted({owner for owner in self._owners.values() if owner > 0})
+        if self._frame_index < 0 or not owners or self._shared_frame is None:
+            return False
+        try:
+            frame = _shared_frame(next_frame)
+        except InputError:
+            return False
+        if any(child is not None and child.pending for child in self._children):
+            return False  # the shared frame is rewritten only once every child has read it
+        handle = self._shared_frame.write(frame)
+        for owner in owners:
+            target_ids = [k for k, o in self._owners.items() if o == owner]
+            self._child(owner).update(target_ids, handle, speculative=True)
+        self._speculation = Speculation(next_frame, frame, tuple(owners))
+        return True
+
     def add_target(self, target_id: str, frame: np.ndarray, box: Box) -> TrackResult:
         """Start a new target on `frame`, which must be the frame last processed."""
+        self._cancel_speculation()
         if target_id in self._owners:
             raise InputError(f"target {target_id!r} already exists; use reset_target to move it")
         return self._start(target_id, frame, box)
 
     def remove_target(self, target_id: str) -> None:
         """Stop tracking a target."""
+        self._cancel_speculation()
         if target_id not in self._owners:
             raise InputError(f"no target {target_id!r} (targets: {', '.join(self._owners)})")
         self._drop(target_id)
@@ -131,12 +175,14 @@ class MultiTracker:
     def reset_target(self, target_id: str, frame: np.ndarray, box: Box) -> TrackResult:
         """Restart a target from a corrected box on `frame` (the frame last processed), e.g. when
         a user fixes a drifting box; the other targets are untouched."""
+        self._cancel_speculation()
         if target_id not in self._owners:
             raise InputError(f"no target {target_id!r} (targets: {', '.join(self._owners)})")
         return self._start(target_id, frame, box)
 
     def close(self) -> None:
         """Stop the worker threads and child processes (this process's trackers stay readable)."""
+        self._cancel_speculation()
         if self._pool is not None:
             self._pool.shutdown(wait=True)
             self._pool = None
@@ -186,6 +232,21 @@ class MultiTracker:
         else:
             self._child(owner).remove(target_id)
             _answers(self._child(owner))
+
+    def _cancel_speculation(self) -> None:
+        """Undo an outstanding speculation: each child puts its trackers back as they were
+        before it; its answers (results or errors) and the rollback's are dropped."""
+        speculation, self._speculation = self._speculation, None
+        if speculation is None:
+            return
+        children = [self._children[owner - 1] for owner in speculation.owners]
+        for child in children:
+            with contextlib.suppress(Exception):  # a child gone is reported by the next command
+                child.rollback()
+        for child in children:
+            while child.pending:
+                with contextlib.suppress(Exception):
+                    child.collect()
 
     def _least_loaded_owner(self) -> int:
         """This process (0) or the child (1, 2, ...) with the fewest targets, first on ties."""

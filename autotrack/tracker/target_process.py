@@ -20,6 +20,7 @@ the next one of the same pool starts at once, with no start-up to pay again.
 from __future__ import annotations
 
 import contextlib
+import copy
 import os
 import socket
 import subprocess
@@ -102,9 +103,16 @@ class TargetProcess:
         """Ask for a new tracker (or a restarted one) for `target_id` on `frame`."""
         self._send(("start", target_id, frame, tuple(float(v) for v in box)))
 
-    def update(self, target_ids: Sequence[str], frame: FrameHandle) -> None:
-        """Ask for these targets to be tracked into `frame`."""
-        self._send(("update", tuple(target_ids), frame))
+    def update(
+        self, target_ids: Sequence[str], frame: FrameHandle, *, speculative: bool = False
+    ) -> None:
+        """Ask for these targets to be tracked into `frame`; `speculative`: keep a copy of
+        their trackers first, for `rollback` to restore."""
+        self._send(("update", tuple(target_ids), frame, speculative))
+
+    def rollback(self) -> None:
+        """Put the trackers of the last speculative update back as they were before it."""
+        self._send(("rollback",))
 
     def remove(self, target_id: str) -> None:
         """Drop a target's tracker."""
@@ -182,6 +190,7 @@ class _ChildState:
         self.params: TrackerParams | None = None
         self.colour_table: np.ndarray | None = None
         self.trackers: dict = {}
+        self.snapshots: dict = {}  # target id -> its tracker before the last speculative update
         self.frames = _AttachedFrames()
 
     def answer(self, command: tuple) -> Mapping[str, TrackResult]:
@@ -193,22 +202,47 @@ class _ChildState:
 
             _, self.params, self.colour_table, opencv_threads = command
             cv2.setNumThreads(opencv_threads)
-            self.trackers = {}
+            self.trackers, self.snapshots = {}, {}
             return {}
         if kind == "start":
             _, target_id, handle, box = command
+            self.snapshots.pop(target_id, None)
             tracker = AutoTrack(self.params, colour_table=self.colour_table)
             result = tracker.init(self.frames.view(handle), box)
             self.trackers[target_id] = tracker
             return {target_id: result}
         if kind == "update":
-            _, target_ids, handle = command
+            _, target_ids, handle, speculative = command
+            self._keep_snapshots(target_ids, speculative)
             frame = self.frames.view(handle)
             return {target_id: self.trackers[target_id].update(frame) for target_id in target_ids}
+        if kind == "rollback":
+            self.trackers.update(self.snapshots)
+            self.snapshots = {}
+            return {}
         if kind == "remove":
             self.trackers.pop(command[1], None)
+            self.snapshots.pop(command[1], None)
             return {}
         raise ValueError(f"unknown command {kind!r}")
+
+    def _keep_snapshots(self, target_ids: Sequence[str], speculative: bool) -> None:
+        """Before a speculative update, a copy of each of its trackers (only the last
+        speculative update's are kept); before a plain one, drop the copies of its targets.
+
+        The copy shares the tracker's FFT plans (`transform`: they hold scratch memory only,
+        every input is written before a transform runs, and they cannot be copied) and its
+        parameters (frozen); a tracker put back continues exactly as if the update had never
+        run."""
+        if not speculative:
+            for target_id in target_ids:
+                self.snapshots.pop(target_id, None)
+            return
+        self.snapshots = {}
+        for target_id in target_ids:
+            tracker = self.trackers[target_id]
+            shared = {id(tracker.transform): tracker.transform, id(tracker.params): tracker.params}
+            self.snapshots[target_id] = copy.deepcopy(tracker, shared)
 
 
 class _AttachedFrames:
