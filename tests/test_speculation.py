@@ -47,7 +47,7 @@ def occluded_sequence(tmp_path_factory) -> Path:
 def counted(monkeypatch) -> dict[str, int]:
     """Counts the speculations started and undone by every MultiTracker."""
     counts = {"started": 0, "undone": 0}
-    speculate, cancel = MultiTracker.speculate, MultiTracker._cancel_speculation
+    speculate, cancel = MultiTracker._speculate, MultiTracker._cancel_speculation
 
     def counted_speculate(self, next_frame):
         started = speculate(self, next_frame)
@@ -58,13 +58,9 @@ def counted(monkeypatch) -> dict[str, int]:
         counts["undone"] += self._speculation is not None
         cancel(self)
 
-    monkeypatch.setattr(MultiTracker, "speculate", counted_speculate)
+    monkeypatch.setattr(MultiTracker, "_speculate", counted_speculate)
     monkeypatch.setattr(MultiTracker, "_cancel_speculation", counted_cancel)
     return counts
-
-
-def no_speculation(monkeypatch) -> None:
-    monkeypatch.setattr(MultiTracker, "speculate", lambda self, next_frame: False)
 
 
 def edits(frames, boxes) -> list[tuple[int | None, Callable[[MultiTracker], object]]]:
@@ -128,6 +124,42 @@ def test_speculating_children_give_the_results_of_one_process(landmarks_sequence
     for a, b in zip(expected, got, strict=True):
         assert_identical(a, b)
     assert counted == {"started": len(frames) - 1, "undone": 0}  # every one consumed
+
+
+def test_an_update_given_the_next_frame_starts_the_children_on_it(landmarks_sequence, counted):
+    frames, boxes, _ = landmarks_sequence
+    params = preset("autotrack")
+    small = np.zeros((8, 8, 3), np.uint8)  # refused by every tracker
+
+    def unreadable() -> np.ndarray:
+        raise InputError("frame 5: cannot read")
+
+    def session(tracker: MultiTracker, ahead: bool) -> list:
+        def next_of(frame) -> Callable[[], np.ndarray] | None:
+            return (frame if callable(frame) else lambda: frame) if ahead else None
+
+        steps = [(None, lambda t: t.init(frames[0], boxes))]
+        steps += [
+            (None, lambda t, k=k: t.update(frames[k], next_of(frames[k + 1]))) for k in (1, 2)
+        ]
+        steps += [
+            (None, lambda t: t.update(frames[3], next_of(small))),  # the child's update fails
+            (None, lambda t: t.update(small, next_of(frames[4]))),  # consumed: raises here
+            (None, lambda t: t.update(frames[4], next_of(unreadable))),  # none started
+            (None, lambda t: t.update(frames[5], next_of(frames[6]))),
+            (None, lambda t: t.update(frames[6])),
+        ]
+        return replay(tracker, steps, frames, speculating=False)
+
+    with MultiTracker(params, processes=2) as plain:
+        expected = session(plain, ahead=False)
+    with MultiTracker(params, processes=2) as ahead:
+        got = session(ahead, ahead=True)
+    assert_same_answers(expected, got)
+    assert "frame size 8x8" in expected[4]
+    # On frames 2, 3, the small one and 6; not after the failing update (this process's
+    # targets raise first), nor on the frame that cannot be read.
+    assert counted == {"started": 4, "undone": 0}
 
 
 def test_every_call_that_undoes_a_speculation_gives_the_results_without_one(

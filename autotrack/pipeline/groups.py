@@ -124,9 +124,10 @@ class TrackerGroups:
 
         `frame_of(index)` gives the frame (read only when a group is due). `horizon`: the
         caller advances frame by frame up to it next; the groups' child processes then start
-        on the next frame at once (`following_frame`, `MultiTracker.speculate`; a frame that
-        cannot be read now is not speculated on, its error comes when it is tracked). Returns
-        the results and the tracking time in seconds (NaN when no group was due).
+        on the next frame as soon as this process's targets are tracked (`following_frame`,
+        `MultiTracker.update`'s `next_frame`; a frame that cannot be read then is not
+        speculated on, its error comes when it is tracked). Returns the results and the
+        tracking time in seconds (NaN when no group was due).
         """
         previous = frames.previous_index(frame_index)
         due = [group for group in self._groups if group.head == previous]
@@ -135,21 +136,13 @@ class TrackerGroups:
         frame = frame_of(frame_index)
         started = time.perf_counter()
         results: dict[str, TrackResult] = {}
+        following = following_frame(frames, frame_index, horizon)
+        next_frame = None if following is None else lambda: frame_of(following)
         for group in due:
-            for target_id, result in group.tracker.update(frame).items():
+            for target_id, result in group.tracker.update(frame, next_frame).items():
                 results[target_id] = result.renumbered(frame_index)
             group.head = frame_index
-        seconds = time.perf_counter() - started
-        following = following_frame(frames, frame_index, horizon)
-        if following is not None:
-            try:
-                next_frame = frame_of(following)
-            except Exception:  # noqa: BLE001 - raised again when that frame is tracked
-                next_frame = None
-            if next_frame is not None:
-                for group in due:
-                    group.tracker.speculate(next_frame)
-        return results, seconds
+        return results, time.perf_counter() - started
 
     def remove(self, target_id: str) -> None:
         """Stop tracking a target (nothing when it is not tracked)."""

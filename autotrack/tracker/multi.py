@@ -115,14 +115,19 @@ class MultiTracker:
                 self._child(self._owners[target_id]).start(target_id, handle, box)
         return self._run(lambda target_id, tracker: tracker.init(frame, starts[target_id]))
 
-    def update(self, frame: np.ndarray) -> dict[str, TrackResult]:
-        """Track every target into the next frame."""
+    def update(
+        self, frame: np.ndarray, next_frame: Callable[[], np.ndarray] | None = None
+    ) -> dict[str, TrackResult]:
+        """Track every target into the next frame. `next_frame` gives the frame the update
+        after this one will be given: it is called once this process's targets are tracked,
+        and the children start on that frame (`speculate`) before this frame's answers are
+        collected (an error in it, or an invalid frame: no speculation)."""
         speculation, self._speculation = self._speculation, None
         if speculation is not None and speculation.matches(frame):
             # The children have been tracking this frame since `speculate`.
             self._frame_index += 1
             frame = speculation.frame
-            return self._run(lambda _target_id, tracker: tracker.update(frame))
+            return self._run(lambda _target_id, tracker: tracker.update(frame), next_frame)
         self._speculation = speculation
         self._cancel_speculation()
         if self._frame_index < 0:
@@ -134,7 +139,7 @@ class MultiTracker:
             target_ids = [k for k, owner in self._owners.items() if owner == index]
             if target_ids and child is not None:
                 child.update(target_ids, handle)
-        return self._run(lambda _target_id, tracker: tracker.update(frame))
+        return self._run(lambda _target_id, tracker: tracker.update(frame), next_frame)
 
     def speculate(self, next_frame: np.ndarray) -> bool:
         """Start the children's targets on `next_frame`, the frame the next `update` will be
@@ -142,21 +147,9 @@ class MultiTracker:
         on. Any other call first undoes it. Whether it started (only with a child tracking a
         target, after `init`, and for a valid frame; an invalid one is reported by `update`)."""
         self._cancel_speculation()
-        owners = sorted({owner for owner in self._owners.values() if owner > 0})
-        if self._frame_index < 0 or not owners or self._shared_frame is None:
+        if self._frame_index < 0 or any(c is not None and c.pending for c in self._children):
             return False
-        try:
-            frame = _shared_frame(next_frame)
-        except InputError:
-            return False
-        if any(child is not None and child.pending for child in self._children):
-            return False  # the shared frame is rewritten only once every child has read it
-        handle = self._shared_frame.write(frame)
-        for owner in owners:
-            target_ids = [k for k, o in self._owners.items() if o == owner]
-            self._child(owner).update(target_ids, handle, speculative=True)
-        self._speculation = Speculation(next_frame, frame, tuple(owners))
-        return True
+        return self._speculate(next_frame)
 
     def add_target(self, target_id: str, frame: np.ndarray, box: Box) -> TrackResult:
         """Start a new target on `frame`, which must be the frame last processed."""
@@ -233,6 +226,29 @@ class MultiTracker:
             self._child(owner).remove(target_id)
             _answers(self._child(owner))
 
+    def _speculate(self, next_frame: np.ndarray) -> bool:
+        """Send each child tracking targets a speculative update into `next_frame` (see
+        `speculate`). Only when every command a child has not answered reads the frame written
+        last: `SharedFrame` writes this one into its other segment."""
+        owners = sorted({owner for owner in self._owners.values() if owner > 0})
+        if not owners or self._shared_frame is None:
+            return False
+        try:
+            frame = _shared_frame(next_frame)
+        except InputError:
+            return False
+        handle = self._shared_frame.write(frame)
+        sent: list[int] = []
+        try:
+            for owner in owners:
+                target_ids = [k for k, o in self._owners.items() if o == owner]
+                self._child(owner).update(target_ids, handle, speculative=True)
+                sent.append(owner)
+        finally:
+            if sent:  # what was sent is undone or consumed like any speculation
+                self._speculation = Speculation(next_frame, frame, tuple(sent))
+        return sent == owners
+
     def _cancel_speculation(self) -> None:
         """Undo an outstanding speculation: each child puts its trackers back as they were
         before it; its answers (results or errors) and the rollback's are dropped."""
@@ -274,9 +290,14 @@ class MultiTracker:
             return None
         return self._shared_frame.write(frame)
 
-    def _run(self, step: Callable[[str, AutoTrack], TrackResult]) -> dict[str, TrackResult]:
+    def _run(
+        self,
+        step: Callable[[str, AutoTrack], TrackResult],
+        next_frame: Callable[[], np.ndarray] | None = None,
+    ) -> dict[str, TrackResult]:
         """Apply `step` to every (target id, tracker) of this process, concurrently when there
-        is a pool, then collect the children's answers to the command just sent to them."""
+        is a pool, speculate on `next_frame()` when given, then collect the children's answers
+        to the command sent to them before (the speculation's are left for the next update)."""
         items = list(self._trackers.items())
         try:
             if self._pool is None or len(items) < 2:
@@ -284,18 +305,30 @@ class MultiTracker:
             else:
                 futures = {k: self._pool.submit(step, k, tracker) for k, tracker in items}
                 results = {k: future.result() for k, future in futures.items()}
+            if next_frame is not None:
+                self._speculate_on(next_frame)
         finally:
             results_of_children = self._collect_children()
         results.update(results_of_children)
         index = self._frame_index
         return {k: results[k].renumbered(index) for k in self._owners if k in results}
 
+    def _speculate_on(self, next_frame: Callable[[], np.ndarray]) -> None:
+        """`_speculate` on the frame `next_frame()` gives, when it gives one."""
+        try:
+            frame = next_frame()
+        except Exception:  # noqa: BLE001 - the frame's own error comes when it is tracked
+            return
+        self._speculate(frame)
+
     def _collect_children(self) -> dict[str, TrackResult]:
-        """Every pending answer of every child; the first error is raised once all are in."""
+        """Every pending answer of every child but a speculation's; the first error is raised
+        once all are in."""
         results: dict[str, TrackResult] = {}
         error: Exception | None = None
-        for child in self._children:
-            while child is not None and child.pending:
+        speculating = () if self._speculation is None else self._speculation.owners
+        for owner, child in enumerate(self._children, start=1):
+            while child is not None and child.pending > (owner in speculating):
                 try:
                     results.update(child.collect())
                 except Exception as failure:

@@ -47,26 +47,37 @@ class WorkerError(RuntimeError):
 
 
 class SharedFrame:
-    """One shared-memory segment holding the current frame for every child to read."""
+    """Two shared-memory segments, written in turn, holding the frames for every child to read:
+    the next frame can be written while the children still read the one written before it."""
 
     def __init__(self) -> None:
-        self._memory: SharedMemory | None = None
+        self._memory: list[SharedMemory | None] = [None, None]
+        self._last = 1  # the segment written last
 
     def write(self, frame: np.ndarray) -> FrameHandle:
-        """Copy `frame` (uint8, contiguous) into the segment; returns its handle."""
-        if self._memory is None or self._memory.size < frame.nbytes:
-            self.close()
-            self._memory = SharedMemory(create=True, size=max(frame.nbytes, 1))
-        view = np.ndarray(frame.shape, np.uint8, buffer=self._memory.buf)
+        """Copy `frame` (uint8, contiguous) into the segment not written last; returns its
+        handle. The caller makes sure no child still reads that segment's frame (every command
+        but those given the last handle answered)."""
+        slot = self._last = 1 - self._last
+        memory = self._memory[slot]
+        if memory is None or memory.size < frame.nbytes:
+            _remove(memory)
+            memory = self._memory[slot] = SharedMemory(create=True, size=max(frame.nbytes, 1))
+        view = np.ndarray(frame.shape, np.uint8, buffer=memory.buf)
         view[...] = frame
-        return self._memory.name, frame.shape
+        return memory.name, frame.shape
 
     def close(self) -> None:
-        """Release and remove the segment."""
-        if self._memory is not None:
-            self._memory.close()
-            self._memory.unlink()
-            self._memory = None
+        """Release and remove the segments."""
+        for memory in self._memory:
+            _remove(memory)
+        self._memory = [None, None]
+
+
+def _remove(memory: SharedMemory | None) -> None:
+    if memory is not None:
+        memory.close()
+        memory.unlink()
 
 
 class TargetProcess:
@@ -246,27 +257,33 @@ class _ChildState:
 
 
 class _AttachedFrames:
-    """The child's read-only views of the parent's shared frame segments."""
+    """The child's read-only views of the parent's shared frame segments (the two a
+    `SharedFrame` writes in turn stay attached)."""
+
+    KEPT = 2
 
     def __init__(self) -> None:
-        self._memory: SharedMemory | None = None
+        self._memory: dict[str, SharedMemory] = {}
 
     def view(self, handle: FrameHandle) -> np.ndarray:
         name, shape = handle
-        if self._memory is None or self._memory.name != name:
-            self.close()
-            self._memory = SharedMemory(name=name)
+        memory = self._memory.pop(name, None)  # put back last: the least recent goes first
+        if memory is None:
+            while len(self._memory) >= self.KEPT:  # a segment the parent replaced
+                self._memory.pop(next(iter(self._memory))).close()
+            memory = SharedMemory(name=name)
             # The parent owns (and removes) the segment: without this the child's own resource
             # tracker would remove it when the child exits, and warn about a leak.
-            resource_tracker.unregister(self._memory._name, "shared_memory")
-        frame = np.ndarray(shape, np.uint8, buffer=self._memory.buf)
+            resource_tracker.unregister(memory._name, "shared_memory")
+        self._memory[name] = memory
+        frame = np.ndarray(shape, np.uint8, buffer=memory.buf)
         frame.flags.writeable = False
         return frame
 
     def close(self) -> None:
-        if self._memory is not None:
-            self._memory.close()
-            self._memory = None
+        for memory in self._memory.values():
+            memory.close()
+        self._memory = {}
 
 
 def _picklable(error: Exception) -> Exception:
