@@ -2,6 +2,9 @@
 
 from __future__ import annotations
 
+import contextlib
+import os
+import sys
 import threading
 from pathlib import Path
 
@@ -10,6 +13,7 @@ import numpy as np
 import pytest
 
 from autotrack.errors import InputError
+from autotrack.io import frames
 from autotrack.io.frames import FrameCache, ImageSequence, VideoFrames, open_frames
 from tests.conftest import shared_sequence_dir
 
@@ -223,6 +227,31 @@ def test_frame_cache_reads_the_next_image_ahead_in_order(tmp_path):
     assert len(ahead) == 1 and next(iter(ahead)).startswith("prefetch")
     np.testing.assert_array_equal(cache.read(0), cv2.cvtColor(written[0], cv2.COLOR_BGR2RGB))
     assert source.readers[0] == main  # the jump back: no longer cached, read here
+
+
+class _PriorityRecordingSequence(ImageSequence):
+    """An image sequence that notes the scheduling niceness of the thread reading each frame."""
+
+    def __init__(self, paths, name):
+        super().__init__(paths, name)
+        self.niceness: dict[int, int] = {}
+
+    def read(self, index):
+        self.niceness[index] = os.getpriority(os.PRIO_PROCESS, threading.get_native_id())
+        return super().read(index)
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="per-thread niceness: Linux")
+def test_frame_cache_reads_ahead_at_a_low_priority_and_the_caller_keeps_its_own(tmp_path):
+    _write_frames(tmp_path / "seq", 4)
+    source = _PriorityRecordingSequence(sorted((tmp_path / "seq").glob("*.png")), "seq")
+    own = os.getpriority(os.PRIO_PROCESS, threading.get_native_id())
+    with contextlib.closing(FrameCache(source, size=2)) as cache:
+        for index in range(4):
+            cache.read(index)
+    assert source.niceness[0] == source.niceness[1] == own  # read by the caller
+    assert source.niceness[2] == source.niceness[3] == max(own, frames.READ_AHEAD_NICENESS)
+    assert os.getpriority(os.PRIO_PROCESS, threading.get_native_id()) == own
 
 
 def test_frame_cache_close_stops_its_read_ahead_thread_and_reads_go_on(tmp_path):

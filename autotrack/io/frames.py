@@ -10,7 +10,9 @@ backward steps, and a longer backward jump re-opens the video and decodes from t
 
 from __future__ import annotations
 
+import contextlib
 import os
+import sys
 import threading
 from abc import ABC, abstractmethod
 from collections import OrderedDict
@@ -316,7 +318,8 @@ class FrameCache:
     raises the source's own error when the caller asks for it, as without prefetching. One
     thread ("prefetch") serves every read-ahead of the cache, started on the first and stopped
     by `close` (or when the cache is garbage-collected); a thread per frame cost the caller
-    ~0.1 ms a frame to start.
+    ~0.1 ms a frame to start. It runs at a low priority (`READ_AHEAD_NICENESS`): with tracking
+    processes on every core it decodes in their idle time instead of slowing them down.
     """
 
     def __init__(self, frames: FrameSource, size: int, *, prefetch: bool = True) -> None:
@@ -345,7 +348,9 @@ class FrameCache:
         following = index + 1
         if self.prefetch and index == self._last_read + 1 and following < len(self.frames):
             if self._reader is None:
-                self._reader = ThreadPoolExecutor(max_workers=1, thread_name_prefix="prefetch")
+                self._reader = ThreadPoolExecutor(
+                    max_workers=1, thread_name_prefix="prefetch", initializer=_yield_to_trackers
+                )
             self._pending = (following, self._reader.submit(self.frames.read, following))
         self._last_read = index
         return image
@@ -371,3 +376,16 @@ class FrameCache:
         if self._reader is not None:
             self._reader.shutdown(wait=True)
             self._reader = None
+
+
+READ_AHEAD_NICENESS = 19
+"""Scheduling niceness of the read-ahead thread (Linux: per thread): it decodes on a core the
+trackers leave idle rather than taking turns with them (docs/benchmarks.md, Speed)."""
+
+
+def _yield_to_trackers() -> None:
+    """Lower the calling thread's scheduling priority to `READ_AHEAD_NICENESS`, where the
+    system allows it (a caller waiting for its frame leaves a core idle, where it runs)."""
+    if sys.platform.startswith("linux"):
+        with contextlib.suppress(OSError):
+            os.setpriority(os.PRIO_PROCESS, threading.get_native_id(), READ_AHEAD_NICENESS)
