@@ -8,13 +8,16 @@ with child processes (`processes` > 1: the targets are spread over this process 
 serialise on the GIL). Every result carries the multi-tracker's frame index, so a target added
 or reset later is numbered like the others.
 
-Speculation (`speculate`): once a frame's results are in, the caller may name the frame the next
-`update` will get; the children start tracking it at once, while this process stores results,
-solves the pose or reads frames, and the next `update` with that frame collects their answers.
-Each child keeps a copy of those trackers first (`target_process`); any other call before that
-update (another frame, init, a target added, reset or removed, close) first puts them back and
-drops the speculative answers, errors included, so every call pattern gives the results of a
-tracker that never speculated, bit for bit.
+Speculation: a caller that knows the frame the next `update` will get passes it along
+(`update(frame, next_frame)`, called once this process's targets are tracked; or `speculate`
+between two calls). The children start tracking it at once, while this process collects their
+answers, stores results, solves the pose and reads the next frame, and the next `update` with
+that frame (the same array, or equal values) collects their answers without sending anything.
+Each child copies the trackers it updates speculatively first (`target_process`); any other
+call before that update (another frame, init, a target added, reset or removed, close) first
+has them put back and drops the speculative answers, errors included, so every call pattern
+gives the results of a tracker that never speculated, bit for bit. In-process trackers never
+speculate (their work would only move, not overlap).
 """
 
 from __future__ import annotations
@@ -314,7 +317,10 @@ class MultiTracker:
         return {k: results[k].renumbered(index) for k in self._owners if k in results}
 
     def _speculate_on(self, next_frame: Callable[[], np.ndarray]) -> None:
-        """`_speculate` on the frame `next_frame()` gives, when it gives one."""
+        """`_speculate` on the frame `next_frame()` gives, when it gives one (not asked for
+        without a child tracking a target: nothing to speculate)."""
+        if not any(owner > 0 for owner in self._owners.values()):
+            return
         try:
             frame = next_frame()
         except Exception:  # noqa: BLE001 - the frame's own error comes when it is tracked

@@ -8,6 +8,13 @@ every child), sends a short command over a socket and later collects the `TrackR
 box, signals and three small maps each). The child runs the same code on the same inputs, so
 its results are bit for bit those of an in-process tracker.
 
+The frames alternate between two segments, so the parent can write the next frame while a
+child still reads the current one. A speculative update (`update(..., speculative=True)`, sent
+before the parent knows the frame is wanted: `MultiTracker.speculate`) first copies the
+trackers it moves (~0.1 ms each; the copy shares their FFT plans, which hold scratch buffers
+only, and their frozen parameters); `rollback` puts those copies back, so a tracker rolled
+back continues exactly as if the update had never run.
+
 A child is a fresh interpreter (`python -c ...`, talking over a socket pair), neither a fork
 (which would copy the parent's threads' locks: the app runs a web server) nor a
 `multiprocessing` spawn (which re-runs the caller's main script, unguarded in most scripts).
