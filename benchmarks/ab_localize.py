@@ -7,6 +7,8 @@ read ahead as the pipeline does), one frame each in alternating order, so a busy
 both alike. Prints the medians per frame of the main thread's CPU time (`time.thread_time`),
 of the part outside the trackers (pose, refinement, bookkeeping: the frame minus
 `TrackerGroups.advance`) and of the wall time, and whether every box and pose is identical.
+With `--processes 2` one side's children may track (speculatively, the next frame) during the
+other side's frame: time the two-process wall clock with `ab_runs.py` (whole runs).
 
 python benchmarks/ab_localize.py integration3
 python benchmarks/ab_localize.py HEAD~1 --frames 150 --processes 2
