@@ -220,6 +220,8 @@ def test_frame_cache_reads_the_next_image_ahead_in_order(tmp_path):
     for index in range(6):
         expected = cv2.cvtColor(written[index], cv2.COLOR_BGR2RGB)
         np.testing.assert_array_equal(cache.read(index), expected)
+        # Shared by every caller (and trusted unchanged by a speculating tracker): read only.
+        assert not cache.read(index).flags.writeable
     main = threading.current_thread().name
     assert source.readers[0] == source.readers[1] == main
     # One read-ahead thread for the whole run, not one per frame.

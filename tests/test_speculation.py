@@ -296,3 +296,21 @@ def test_a_frame_that_cannot_be_read_is_not_speculated_on(occluded_sequence, tmp
                 outcomes.append(outcome.frame_index)
         assert outcomes == list(range(6))  # frame 5 is yielded, frame 6 raises as it is read
     assert counted["started"] == 4  # on frames 2-5; frame 6 could not be read after frame 5
+
+
+def test_a_writeable_frame_rewritten_in_place_is_tracked_as_it_is_now(landmarks_sequence, counted):
+    """A caller that speculates on its writeable buffer, then writes another frame into that
+    same buffer (a decoder reusing its output), gets the new frame tracked: a writeable array
+    is compared by its values, never taken for the speculated frame by its identity."""
+    frames, boxes, _ = landmarks_sequence
+    params = preset("autotrack")
+    with MultiTracker(params, boxes) as alone:
+        alone.init(frames[0], boxes)
+        expected = alone.update(frames[2])
+    buffer = np.array(frames[1])
+    with MultiTracker(params, boxes, processes=2) as spread:
+        spread.init(frames[0], boxes)
+        assert spread.speculate(buffer)
+        buffer[...] = frames[2]
+        assert_identical(expected, spread.update(buffer))
+    assert counted == {"started": 1, "undone": 1}

@@ -342,6 +342,9 @@ class FrameCache:
         image = self._prefetched(index)
         if image is None:
             image = self.frames.read(index)
+        # Read-only: every caller shares the cached array (and a tracker that speculated on it
+        # trusts that it does not change, `autotrack.tracker.speculation`).
+        image.flags.writeable = False
         self._cached[index] = image
         if len(self._cached) > self.size:
             self._cached.popitem(last=False)

@@ -128,8 +128,8 @@ class MultiTracker:
         speculation, self._speculation = self._speculation, None
         if speculation is not None and speculation.matches(frame):
             # The children have been tracking this frame since `speculate`.
+            frame = _shared_frame(frame)
             self._frame_index += 1
-            frame = speculation.frame
             return self._run(lambda _target_id, tracker: tracker.update(frame), next_frame)
         self._speculation = speculation
         self._cancel_speculation()
@@ -146,9 +146,10 @@ class MultiTracker:
 
     def speculate(self, next_frame: np.ndarray) -> bool:
         """Start the children's targets on `next_frame`, the frame the next `update` will be
-        given (unchanged, the same array or an equal one): they track it while the caller goes
-        on. Any other call first undoes it. Whether it started (only with a child tracking a
-        target, after `init`, and for a valid frame; an invalid one is reported by `update`)."""
+        given (the same read-only array, or one of equal values): they track it while the
+        caller goes on. Any other call first undoes it. Whether it started (only with a child
+        tracking a target, after `init`, and for a valid frame; an invalid one is reported by
+        `update`)."""
         self._cancel_speculation()
         if self._frame_index < 0 or any(c is not None and c.pending for c in self._children):
             return False
@@ -249,7 +250,8 @@ class MultiTracker:
                 sent.append(owner)
         finally:
             if sent:  # what was sent is undone or consumed like any speculation
-                self._speculation = Speculation(next_frame, frame, tuple(sent))
+                seen = self._shared_frame.view(handle)
+                self._speculation = Speculation(next_frame, seen, tuple(sent))
         return sent == owners
 
     def _cancel_speculation(self) -> None:

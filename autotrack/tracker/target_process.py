@@ -74,6 +74,15 @@ class SharedFrame:
         view[...] = frame
         return memory.name, frame.shape
 
+    def view(self, handle: FrameHandle) -> np.ndarray:
+        """A read-only view of the frame `handle` names, as the children read it (valid until
+        its segment is written again)."""
+        name, shape = handle
+        memory = next(m for m in self._memory if m is not None and m.name == name)
+        frame = np.ndarray(shape, np.uint8, buffer=memory.buf)
+        frame.flags.writeable = False
+        return frame
+
     def close(self) -> None:
         """Release and remove the segments."""
         for memory in self._memory:
