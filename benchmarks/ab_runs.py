@@ -16,6 +16,7 @@ python benchmarks/ab_runs.py HEAD~1 --runs 4 --processes 1
 
 from __future__ import annotations
 
+import inspect
 import json
 import os
 import statistics
@@ -28,9 +29,10 @@ from pathlib import Path
 
 import numpy as np
 from ab_tracker import ROOT, revision_parser
-from speed import render_multi_sequence
+from speed import _children_cpu, render_multi_sequence
 
-RUN = """
+RUN = (
+    """
 import json, os, sys, time
 from pathlib import Path
 import cv2, numpy as np
@@ -42,17 +44,9 @@ from autotrack.params import preset
 from autotrack.pipeline import localize_sequence
 from autotrack.tracker.target_process import WorkerPool
 
-def children_cpu():
-    total = 0.0
-    for stat in Path("/proc").glob("[0-9]*/stat"):
-        try:
-            fields = stat.read_text().rsplit(")", 1)[1].split()
-        except OSError:
-            continue
-        if int(fields[1]) == os.getpid():
-            total += (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
-    return total
-
+"""
+    + inspect.getsource(_children_cpu)
+    + """
 sequence, out, processes = Path(sys.argv[1]), sys.argv[2], int(sys.argv[3])
 cv2.setNumThreads(1)
 scene = load_scene(sequence / "scene.json")
@@ -65,12 +59,12 @@ with WorkerPool() as pool:
         for index in range(len(source)):
             source.read_bgr(index)
     with open_frames(sequence) as source:
-        wall, cpu, children = time.perf_counter(), time.process_time(), children_cpu()
+        wall, cpu, children = time.perf_counter(), time.process_time(), _children_cpu()
         records = list(
             localize_sequence(source, scene, boxes, params, processes=processes, worker_pool=pool)
         )
         wall, cpu = time.perf_counter() - wall, time.process_time() - cpu
-        children = children_cpu() - children
+        children = _children_cpu() - children
 n = len(records)
 np.savez(
     out,
@@ -81,6 +75,7 @@ np.savez(
 print(json.dumps({"package": os.path.dirname(autotrack.__file__), "rate": n / wall,
                   "cpu_ms": cpu / n * 1e3, "children_ms": children / n * 1e3}))
 """
+)
 
 
 def run_side(root: Path, sequence: Path, out: Path, processes: int, workdir: Path) -> dict:
