@@ -424,7 +424,7 @@ class TabController(SessionCommands):
         if run is None or self.cursor >= run.frame_count - 1:
             self.stop_playing()
             return
-        self.visit(self.cursor + 1)
+        self.visit(self.cursor + 1, playing=True)
         now = time.perf_counter()
         if self._played_at is not None:
             self.play_seconds[self.cursor] = now - self._played_at
@@ -432,12 +432,14 @@ class TabController(SessionCommands):
         if self.cursor >= run.frame_count - 1:
             self.stop_playing()
 
-    def visit(self, frame_index: int) -> None:
-        """Show `frame_index`, tracking there first when it is the frame after the current."""
+    def visit(self, frame_index: int, *, playing: bool = False) -> None:
+        """Show `frame_index`, tracking there first when it is the frame after the current.
+        `playing`: the frames after it follow, so the trackers' child processes may start on
+        the next one while this one is shown (undone, bit for bit, by a pause and an edit)."""
         run = self.require_run()
         if frame_index == self.cursor + 1:
-            run.track_to(frame_index)
-            run.advance(frame_index)
+            run.track_to(frame_index - 1)
+            run.advance(frame_index, horizon=run.frame_count - 1 if playing else frame_index)
         self.cursor = frame_index
         if self.on_visit is not None:
             self.on_visit()

@@ -169,6 +169,68 @@ def test_playing_tracks_each_frame_until_paused_or_the_end(controller) -> None:
     assert not controller.playing and "At the last frame (60)" in controller.message
 
 
+def _played(sessions: Path, processes: int) -> tuple[dict, dict]:
+    """The demo's four landmarks played for 8 frames, paused, one box corrected on frame 8 and
+    played on to frame 12: every target's results and the poses."""
+    config = AppConfig(
+        sessions_dir=sessions, demo_dir=DEMO, tracker_threads=1, tracker_processes=processes
+    )
+    sessions.mkdir()
+    controller = TabController(config, config.browsable_roots(), RecordingRegistry(), 1)
+    try:
+        controller.open_initial()
+        _draw_demo_boxes(controller)
+        controller.toggle_play()
+        for _ in range(8):
+            controller.play_step()
+        controller.toggle_play()
+        run = controller.run
+        target_id = sorted(run.targets)[1]  # the child's with two processes
+        x, y, w, h = run.targets[target_id].results[8].box
+        controller.select(target_id)
+        controller.place_box((x + 2.0, y + 1.0, w, h))
+        controller.toggle_play()
+        for _ in range(4):
+            controller.play_step()
+        results = {k: dict(t.results) for k, t in run.targets.items()}
+        return results, dict(run.poses)
+    finally:
+        controller.close()
+
+
+def test_playing_with_speculating_children_gives_the_results_of_one_process(
+    tmp_path, monkeypatch
+) -> None:
+    """While playing, the child process starts on the next frame as the current one is shown;
+    a pause and a corrected box undo it. Boxes, maps and poses: those of one process."""
+    from autotrack.tracker.multi import MultiTracker
+    from tests.test_target_process import assert_identical
+
+    started, undone = [], []
+    speculate, cancel = MultiTracker._speculate, MultiTracker._cancel_speculation
+
+    def counted_cancel(self) -> None:
+        undone.append(self._speculation is not None)
+        cancel(self)
+
+    monkeypatch.setattr(
+        MultiTracker, "_speculate", lambda self, frame: started.append(speculate(self, frame))
+    )
+    monkeypatch.setattr(MultiTracker, "_cancel_speculation", counted_cancel)
+    expected, expected_poses = _played(tmp_path / "one", processes=1)
+    assert started == []
+    got, poses = _played(tmp_path / "two", processes=2)
+    # On frames 2-9 and 10-13; undone by the correction on frame 8 and by the close.
+    assert (sum(started), sum(undone)) == (12, 2)
+    assert list(got) == list(expected) and sorted(poses) == sorted(expected_poses)
+    for target_id, results in expected.items():
+        assert sorted(got[target_id]) == sorted(results) == list(range(13))
+        for index, result in results.items():
+            assert_identical({target_id: result}, {target_id: got[target_id][index]})
+    for index, pose in expected_poses.items():
+        assert np.array_equal(pose.position, poses[index].position)
+
+
 def test_seeking_forward_tracks_in_between_and_stops_when_interrupted(controller) -> None:
     _draw_demo_boxes(controller)
     run = controller.run
