@@ -130,6 +130,19 @@ def test_real_benchmark_sequence():
     assert source.read(119).shape == (240, 360, 3)
 
 
+def test_image_frames_converted_in_place_are_the_converted_copies():
+    """An image sequence decodes and converts each frame in place (no second frame allocated):
+    the same RGB pixels as OpenCV's BGR decode converted into a copy, on real JPEG frames."""
+    folder = shared_sequence_dir("OTB", "Crossing")
+    with open_frames(folder) as source:
+        for index in (0, 1, 60, -1):
+            frame = source.read(index)
+            bgr = cv2.imread(str(source.paths[index]), cv2.IMREAD_ANYCOLOR)
+            np.testing.assert_array_equal(frame, cv2.cvtColor(bgr, cv2.COLOR_BGR2RGB))
+            np.testing.assert_array_equal(source.read_bgr(index), bgr)
+            assert frame.flags.c_contiguous and frame.flags.owndata
+
+
 def _playlist_to_outside_video(tmp_path: Path) -> tuple[Path, Path]:
     """An allowed root holding playlists (HLS, concat) that point at a video outside it."""
     outside, root = tmp_path / "outside", tmp_path / "root"
