@@ -22,13 +22,11 @@ import os
 import statistics
 import subprocess
 import sys
-import tarfile
 import tempfile
-from io import BytesIO
 from pathlib import Path
 
 import numpy as np
-from ab_tracker import ROOT, revision_parser
+from ab_tracker import ROOT, revision_parser, unpack_revision
 from speed import _children_cpu, render_multi_sequence
 
 RUN = (
@@ -109,17 +107,8 @@ def main() -> int:
     args = parser.parse_args()
     with tempfile.TemporaryDirectory() as folder:
         work = Path(folder)
-        try:
-            archive = subprocess.run(
-                ["git", "-C", str(ROOT), "archive", args.revision, "autotrack"],
-                check=True,
-                capture_output=True,
-            ).stdout
-        except subprocess.CalledProcessError as error:
-            print(f"cannot read {args.revision}: {error.stderr.decode().strip()}", file=sys.stderr)
+        if not unpack_revision(args.revision, work / "base"):
             return 2
-        with tarfile.open(fileobj=BytesIO(archive)) as tar:
-            tar.extractall(work / "base", filter="data")
         sequence = render_multi_sequence(work, args.frames)
         sides = {args.revision: work / "base", "this": ROOT}
         runs: dict[str, list[dict]] = {name: [] for name in sides}

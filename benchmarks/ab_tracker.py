@@ -54,15 +54,28 @@ KERNEL_SEQUENCES = (("DTB70", "Surfing06"), ("UAV123_10fps", "boat5"), ("OTB", "
 BASE_PACKAGE = "autotrack_base"
 
 
-def extract_revision(revision: str, folder: Path) -> None:
-    """`autotrack/` of `revision` as the package `autotrack_base` in `folder`."""
-    archive = subprocess.run(
-        ["git", "-C", str(ROOT), "archive", revision, "autotrack"],
-        check=True,
-        capture_output=True,
-    ).stdout
+def unpack_revision(revision: str, folder: Path) -> bool:
+    """`autotrack/` of `revision` unpacked into `folder` as it is; False (and a message on
+    stderr) when git cannot read the revision."""
+    try:
+        archive = subprocess.run(
+            ["git", "-C", str(ROOT), "archive", revision, "autotrack"],
+            check=True,
+            capture_output=True,
+        ).stdout
+    except subprocess.CalledProcessError as error:
+        print(f"cannot read {revision}: {error.stderr.decode().strip()}", file=sys.stderr)
+        return False
     with tarfile.open(fileobj=io.BytesIO(archive)) as tar:
         tar.extractall(folder, filter="data")
+    return True
+
+
+def import_revision(revision: str, folder: Path) -> bool:
+    """`autotrack/` of `revision` as the package `autotrack_base` in `folder`, and `folder` on
+    the import path; False (and a message on stderr) when git cannot read the revision."""
+    if not unpack_revision(revision, folder):
+        return False
     package = folder / BASE_PACKAGE
     (folder / "autotrack").rename(package)
     pattern = re.compile(r"\b(from|import) autotrack\b|\"autotrack\.")
@@ -70,16 +83,6 @@ def extract_revision(revision: str, folder: Path) -> None:
         text = path.read_text()
         renamed = pattern.sub(lambda m: m.group(0).replace("autotrack", BASE_PACKAGE), text)
         path.write_text(renamed)
-
-
-def import_revision(revision: str, folder: Path) -> bool:
-    """`extract_revision` into `folder` and `folder` on the import path; False (and a message on
-    stderr) when git cannot read the revision."""
-    try:
-        extract_revision(revision, folder)
-    except subprocess.CalledProcessError as error:
-        print(f"cannot read {revision}: {error.stderr.decode().strip()}", file=sys.stderr)
-        return False
     sys.path.insert(0, str(folder))
     return True
 
