@@ -125,13 +125,12 @@ class MultiTracker:
         after this one will be given: it is called once this process's targets are tracked,
         and the children start on that frame (`speculate`) before this frame's answers are
         collected (an error in it, or an invalid frame: no speculation)."""
-        speculation, self._speculation = self._speculation, None
-        if speculation is not None and speculation.matches(frame):
+        if self._speculation is not None and self._speculation.matches(frame):
             # The children have been tracking this frame since `speculate`.
+            self._speculation = None
             frame = _shared_frame(frame)
             self._frame_index += 1
             return self._run(lambda _target_id, tracker: tracker.update(frame), next_frame)
-        self._speculation = speculation
         self._cancel_speculation()
         if self._frame_index < 0:
             raise InputError("call init(frame, boxes) before update(frame)")
