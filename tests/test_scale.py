@@ -153,8 +153,9 @@ def test_model_is_a_running_average_with_the_learning_rate():
     denominators = [np.sum(np.abs(spectrum) ** 2, axis=1) for spectrum in spectra]
     expected_numerator = (1 - rate) * numerators[0] + rate * numerators[1]
     expected_denominator = (1 - rate) * denominators[0] + rate * denominators[1]
-    np.testing.assert_allclose(scale._numerator, expected_numerator, rtol=1e-4, atol=1e-3)
-    np.testing.assert_allclose(scale._denominator, expected_denominator, rtol=1e-4)
+    half = PARAMS.num_scales // 2 + 1  # the model keeps the non-negative frequencies
+    np.testing.assert_allclose(scale._numerator, expected_numerator[:half], rtol=1e-4, atol=1e-3)
+    np.testing.assert_allclose(scale._denominator, expected_denominator[:half], rtol=1e-4)
 
 
 def test_same_image_keeps_the_scale():
@@ -211,6 +212,7 @@ def test_shifted_samples_are_the_release_reuse_of_the_detection_samples(best):
     scale.update(image, POSITION, new_scale, best)
     rate = PARAMS.scale_learning_rate
     learnt = scale.label_f[:, None] * np.conj(np.fft.fft(reused, axis=0))
+    learnt = learnt[: n // 2 + 1]  # the model keeps the non-negative frequencies
     np.testing.assert_allclose(
         scale._numerator, (1 - rate) * previous + rate * learnt, rtol=1e-4, atol=1e-4
     )
@@ -231,7 +233,8 @@ def test_update_at_the_detected_scale_learns_this_frames_transform_exactly():
         numerator, denominator = scale._numerator.copy(), scale._denominator.copy()
         samples_f = scipy.fft.fft(scale._samples.copy(), axis=0, workers=1)
         scale.update(image, POSITION, 1.0, best=PARAMS.num_scales // 2)
-        learnt = scale.label_f[:, None] * np.conj(samples_f)
+        samples_f = samples_f[: PARAMS.num_scales // 2 + 1]  # the model's frequencies
+        learnt = scale.label_f[: len(samples_f), None] * np.conj(samples_f)
         energy = np.sum(np.real(samples_f * np.conj(samples_f)), axis=1)
         expected = (1 - rate) * numerator + rate * learnt
         np.testing.assert_allclose(
@@ -239,3 +242,38 @@ def test_update_at_the_detected_scale_learns_this_frames_transform_exactly():
         )
         expected = (1 - rate) * denominator + rate * energy
         np.testing.assert_allclose(scale._denominator, expected, rtol=1e-6)
+
+
+def test_half_spectrum_model_gives_the_full_spectrum_filter_bit_for_bit():
+    """The model kept for the non-negative frequencies (`ScaleFilter.response`) gives, frame
+    after frame, the response and model values of the full-spectrum filter it replaced: full
+    FFTs of the same samples, the same kernels over all 33 frequencies, the complex inverse."""
+    import scipy.fft
+
+    from autotrack.tracker.scale import _learn, _response_spectrum
+
+    scale = make_filter()
+    n, rate, half = PARAMS.num_scales, PARAMS.scale_learning_rate, PARAMS.num_scales // 2 + 1
+    first = target_image(SIDE)
+    scale.update(first, POSITION, 1.0, best=None)
+    samples_f = scipy.fft.fft(scale._extract(first, POSITION, 1.0, np.arange(n)), axis=0)
+    numerator, denominator = np.empty_like(samples_f), np.empty(n, np.float32)
+    _learn(numerator, denominator, scale.label_f, samples_f, rate, True)
+    estimate, chosen = 1.0, set()
+    for seed, side in enumerate((SIDE * 1.04, SIDE * 1.08, SIDE, SIDE * 0.93, SIDE * 0.9), 1):
+        image = target_image(side, seed=seed)
+        best, new_estimate = scale.detect(image, POSITION, estimate)
+        samples_f = scipy.fft.fft(scale._samples, axis=0, workers=1)
+        response_f = np.empty(n, np.complex64)
+        _response_spectrum(numerator, denominator, samples_f, PARAMS.scale_lambda, response_f)
+        expected = scipy.fft.ifft(response_f, workers=1).real
+        np.testing.assert_array_equal(scale.response(scale._samples_f), expected)
+        assert best == int(expected.argmax())
+        reused = scale._shifted_samples(image, POSITION, new_estimate, best)
+        samples_f = scipy.fft.fft(reused, axis=0, workers=1)
+        _learn(numerator, denominator, scale.label_f, samples_f, rate, False)
+        scale.update(image, POSITION, new_estimate, best)
+        np.testing.assert_array_equal(scale._numerator, numerator[:half])
+        np.testing.assert_array_equal(scale._denominator, denominator[:half])
+        estimate, chosen = new_estimate, chosen | {best}
+    assert len(chosen) >= 3  # scale changes: the shifted reuse and fresh samples both ran

@@ -21,6 +21,13 @@ def symmetric_hann(n: int) -> np.ndarray:
     return 0.5 * (1.0 - np.cos(2.0 * np.pi * k / (n - 1)))
 
 
+def half_spectrum(samples: np.ndarray) -> np.ndarray:
+    """FFT along the scale axis of real (scales, dims) samples, non-negative frequencies only:
+    (scales // 2 + 1, dims) complex64, equal in value to the first rows of the full FFT
+    (pocketfft computes a real input's full FFT by this real transform)."""
+    return scipy.fft.rfft(samples, axis=0, workers=1)
+
+
 @njit(cache=True, nogil=True, fastmath=False)
 def _learn(numerator, denominator, label_f, samples_f, rate, first):
     """The model's running average in one pass: numerator <- (1 - rate) numerator + rate
@@ -120,17 +127,34 @@ class ScaleFilter:
     def detect(self, image: np.ndarray, position, scale: float) -> tuple[int, float]:
         """Best scale index and the new (clamped) scale factor."""
         self._samples = self._extract(image, position, scale, self._all_indices)
-        samples_f = scipy.fft.fft(self._samples, axis=0, workers=1)
-        self._samples_f = samples_f
-        response_f = np.empty(samples_f.shape[0], np.complex64)
-        _response_spectrum(
-            self._numerator, self._denominator, samples_f, self.params.scale_lambda, response_f
-        )
-        response = scipy.fft.ifft(response_f, workers=1).real
-        best = int(response.argmax())
+        self._samples_f = half_spectrum(self._samples)
+        best = int(self.response(self._samples_f).argmax())
         new_scale = scale * float(self.scale_steps[best])
         # np.clip's value (a NaN stays NaN) on Python floats
         return best, float(min(max(new_scale, self.min_scale), self.max_scale))
+
+    def response(self, samples_f: np.ndarray) -> np.ndarray:
+        """The correlation response over the scales of samples whose `half_spectrum` is
+        `samples_f`: ifft(sum_d A_d S_d / (B + lambda)) (DSST).
+
+        The model is kept for the non-negative frequencies only: the samples being real, the
+        others are their complex conjugates, bit for bit in the full FFT, and so are the model's
+        and the response's (each is a sum of products of conjugated factors, which rounds to
+        the conjugate), so the full spectrum is rebuilt by conjugation and transformed as
+        before (the same values as the full computation, at half the work).
+        """
+        n = self.params.num_scales
+        response_f = np.empty(n, np.complex64)
+        _response_spectrum(
+            self._numerator,
+            self._denominator,
+            samples_f,
+            self.params.scale_lambda,
+            response_f[: samples_f.shape[0]],
+        )
+        mirrored = n - samples_f.shape[0]
+        response_f[samples_f.shape[0] :] = np.conj(response_f[mirrored:0:-1])
+        return scipy.fft.ifft(response_f, workers=1).real
 
     def _shifted_samples(self, image, position, scale: float, best: int) -> np.ndarray:
         """The release's reuse of the detection samples shifted by the chosen scale index."""
@@ -159,10 +183,11 @@ class ScaleFilter:
         if samples is self._samples and self._samples_f is not None:
             samples_f = self._samples_f  # scale unchanged: the detection samples, transformed
         else:
-            samples_f = scipy.fft.fft(samples, axis=0, workers=1)
+            samples_f = half_spectrum(samples)
         first = self._numerator is None
         if first:
             self._numerator = np.empty(samples_f.shape, np.complex64)
             self._denominator = np.empty(samples_f.shape[0], np.float32)
         rate = self.params.scale_learning_rate
-        _learn(self._numerator, self._denominator, self.label_f, samples_f, rate, first)
+        label_f = self.label_f[: samples_f.shape[0]]
+        _learn(self._numerator, self._denominator, label_f, samples_f, rate, first)
