@@ -15,7 +15,7 @@ import time
 import numpy as np
 
 from autotrack.tracker import dcf, fft_plans
-from autotrack.tracker.fft_plans import WISDOM_ENV
+from autotrack.tracker.fft_plans import PLANNING_EFFORT, WISDOM_ENV
 
 _PLAN_SCRIPT = """
 import hashlib, json, sys, time
@@ -60,7 +60,7 @@ def _plan_in_processes(wisdom, shape, count=1, together=False) -> list[dict]:
 def test_a_second_process_plans_from_the_first_ones_wisdom(tmp_path):
     wisdom = tmp_path / "cache" / "wisdom.json"
     first, second = _plan_in_processes(wisdom, (42, 50, 50), count=2)
-    assert first["effort"] == second["effort"] == "FFTW_MEASURE"
+    assert first["effort"] == second["effort"] == PLANNING_EFFORT
     assert first["measured_seconds"] > 0.0  # the first process measured the new shape
     assert second["measured_seconds"] == 0.0  # the second one read it from the file
     assert first["spectrum"] == second["spectrum"]  # the same plan: bit for bit
@@ -73,7 +73,32 @@ def test_concurrent_planners_of_a_new_shape_end_with_one_plan(tmp_path):
     runs = _plan_in_processes(wisdom, (42, 48, 48), count=3, together=True)
     assert [run["measured_seconds"] > 0.0 for run in runs].count(True) == 1
     assert len({run["spectrum"] for run in runs}) == 1
-    assert all(run["effort"] == "FFTW_MEASURE" for run in runs)
+    assert all(run["effort"] == PLANNING_EFFORT for run in runs)
+
+
+_MEASURED_WISDOM_SCRIPT = """
+import sys
+from pathlib import Path
+from autotrack.tracker import fft_plans
+fft_plans._make_plans(tuple(int(side) for side in sys.argv[2:]), ("FFTW_MEASURE",))
+fft_plans._save_file(Path(sys.argv[1]))
+"""
+
+
+def test_a_shape_only_measured_by_an_older_version_is_searched_again(tmp_path):
+    """Wisdom files written before the patient search hold FFTW_MEASURE plans, which do not
+    satisfy a patient request: the first process searches the shape and updates the file, and
+    the next one plans from it."""
+    wisdom = tmp_path / "wisdom.json"
+    shape = (42, 50, 50)
+    command = [sys.executable, "-c", _MEASURED_WISDOM_SCRIPT, str(wisdom), *map(str, shape)]
+    subprocess.run(command, check=True, capture_output=True)
+    measured_only = wisdom.read_text()
+    first, second = _plan_in_processes(wisdom, shape, count=2)
+    assert first["effort"] == second["effort"] == PLANNING_EFFORT
+    assert first["measured_seconds"] > 0.0 and second["measured_seconds"] == 0.0
+    assert first["spectrum"] == second["spectrum"]
+    assert wisdom.read_text() != measured_only
 
 
 def test_a_corrupt_wisdom_file_gives_estimated_plans_and_is_left_alone(tmp_path):

@@ -81,7 +81,7 @@ class SpectrumTransform:
     """Planned FFTW real transforms of (channels, rows, cols) float32 maps, one thread.
 
     The hot path of a tracker runs 2 * admm_iterations - 1 multi-channel transforms per frame
-    of a fixed shape. The plans are measured once per machine and shape and kept as FFTW wisdom
+    of a fixed shape. The plans are searched once per machine and shape and kept as FFTW wisdom
     on disk (`fft_plans`), so every tracker, thread and child process of this machine uses the
     same plans (the same rounding); estimated plans when that file cannot be used.
     """

@@ -1,18 +1,21 @@
-"""FFTW plans measured once per machine and kept on disk, so that every process uses the same.
+"""FFTW plans searched once per machine and kept on disk, so that every process uses the same.
 
-A measured plan (FFTW_MEASURE) runs the tracker's (channels, rows, cols) transforms 1.1-2.3x
-faster than an estimated one, but FFTW chooses it by timing candidates, and another plan rounds
-differently: the tracker being chaotic, two processes measuring on their own would track
-differently. So each shape is measured once, by the first process that needs it, and kept as
-FFTW wisdom in a file that every later process, and every child of `target_process`, imports
-before planning:
+FFTW chooses a plan by timing candidates. Its patient search (FFTW_PATIENT) finds plans for
+the tracker's (channels, rows, cols) transforms that run 1.2-1.4x faster than the measured
+ones (FFTW_MEASURE) at a grid side of 50, and 1.5-2.9x faster than estimated ones, for
+0.2-1.1 s of planning per shape (docs/benchmarks.md). Being chosen by timing, another plan
+rounds differently: the tracker being chaotic, two processes planning on their own would
+track differently. So each shape is planned once, by the first process that needs it, and
+kept as FFTW wisdom in a file that every later process, and every child of `target_process`,
+imports before planning:
 
 - the file is `$AUTOTRACK_FFTW_WISDOM` when set, else
   `cache_root() / "fftw" / "wisdom-<machine>-<cpu model hash>-<pyfftw version>.json`;
 - a shape this process has not planned yet is planned under an exclusive `fcntl` lock on
   `<file>.lock`: the file is imported, the plan made from wisdom alone (FFTW_WISDOM_ONLY), and
-  only when the shape is missing it is measured and the merged wisdom written back atomically.
-  Two processes planning one shape at once therefore end with one plan;
+  only when the shape is missing (or only measured, by an older version) it is searched and
+  the merged wisdom written back atomically. Two processes planning one shape at once
+  therefore end with one plan;
 - a file that cannot be locked, read, parsed or written gives estimated plans (FFTW_ESTIMATE)
   for the rest of the process, never an error: a process never mixes wisdom imported later with
   plans estimated earlier, so its own trackers stay alike.
@@ -65,6 +68,10 @@ WISDOM_ENV = "AUTOTRACK_FFTW_WISDOM"
 """Environment variable naming the wisdom file (the tests point it at a temporary folder)."""
 
 WISDOM_FORMAT = 1
+PLANNING_EFFORT = "FFTW_PATIENT"
+"""FFTW's planning rigour for the shapes kept in the wisdom file. Wisdom of a less rigorous
+search (an older version's FFTW_MEASURE) does not satisfy it: such a shape is searched again
+and the file updated."""
 _AXES = (-2, -1)
 _log = logging.getLogger(__name__)
 
@@ -80,7 +87,7 @@ class PlanSet:
     h_forward: object
     """A second r2c plan on its own arrays (the same plan as `forward`)."""
     effort: str
-    """"FFTW_MEASURE" (from the wisdom file), "FFTW_ESTIMATE" (the fallback) or "pocketfft"."""
+    """PLANNING_EFFORT (from the wisdom file), "FFTW_ESTIMATE" (the fallback) or "pocketfft"."""
 
 
 class _Planner:
@@ -180,15 +187,15 @@ def _save_file(path: Path) -> None:
 
 
 def _plan_from_file(shape: tuple[int, int, int], path: Path) -> tuple:
-    """Plans from the file's wisdom, measuring (and saving) the shape if it is missing."""
+    """Plans from the file's wisdom, searching (and saving) the shape if it is missing."""
     with _locked(path):
         _import_file(path)
         try:
-            return _make_plans(shape, ("FFTW_MEASURE", "FFTW_WISDOM_ONLY"))
+            return _make_plans(shape, (PLANNING_EFFORT, "FFTW_WISDOM_ONLY"))
         except RuntimeError:
             pass  # not planned on this machine yet
         start = time.perf_counter()
-        plans = _make_plans(shape, ("FFTW_MEASURE",))
+        plans = _make_plans(shape, (PLANNING_EFFORT,))
         _planner.last_measure_seconds = time.perf_counter() - start
         _save_file(path)
         return plans
@@ -205,7 +212,7 @@ def largest_prime_factor(n: int) -> int:
 
 
 def prefers_pocketfft(side: int) -> bool:
-    """Whether a grid side transforms faster with pocketfft than with a measured FFTW plan.
+    """Whether a grid side transforms faster with pocketfft than with a searched FFTW plan.
 
     FFTW is fastest on even sides made of small primes; on odd sides and sides with a large
     prime factor its plans (Rader, generic codelets) are 1.1-1.6x slower than pocketfft's
@@ -244,23 +251,23 @@ def _pocket_plans(shape: tuple[int, int, int]) -> PlanSet:
 
 def plans_for(channels: int, grid_size: tuple[int, int]) -> PlanSet:
     """Forward, inverse and second forward plans of (channels, *grid_size), one thread each:
-    pocketfft where `prefers_pocketfft`, FFTW plans (measured, or estimated) elsewhere."""
+    pocketfft where `prefers_pocketfft`, FFTW plans (searched, or estimated) elsewhere."""
     shape = (int(channels), int(grid_size[0]), int(grid_size[1]))
     if prefers_pocketfft(shape[1]) or prefers_pocketfft(shape[2]):
         return _pocket_plans(shape)
     with _planner.lock:
         effort = _planner.efforts.get(shape)
-        if effort == "FFTW_MEASURE":
-            plans = _make_plans(shape, ("FFTW_MEASURE", "FFTW_WISDOM_ONLY"))
+        if effort == PLANNING_EFFORT:
+            plans = _make_plans(shape, (PLANNING_EFFORT, "FFTW_WISDOM_ONLY"))
         elif effort is None and not _planner.disabled:
             path = wisdom_path()
             try:
-                plans, effort = _plan_from_file(shape, path), "FFTW_MEASURE"
+                plans, effort = _plan_from_file(shape, path), PLANNING_EFFORT
                 _planner.good_wisdom = pyfftw.export_wisdom()
             except (OSError, ValueError) as error:
                 _log.warning("FFTW plans estimated, not measured (%s)", error)
                 _fall_back()
-        if _planner.disabled and effort != "FFTW_MEASURE":
+        if _planner.disabled and effort != PLANNING_EFFORT:
             plans, effort = _make_plans(shape, ("FFTW_ESTIMATE",)), "FFTW_ESTIMATE"
         _planner.efforts[shape] = effort
     return PlanSet(*plans, effort=effort)
