@@ -8,7 +8,9 @@ run is a whole `localize_sequence` over the speed benchmark's rendered 1280x720 
 own interpreter (the revision's `autotrack/` first on its import path, its children too), the
 two versions alternating run by run, so a slow spell of a shared machine hits both alike.
 Prints every run's rate and CPU time per frame (the parent process, read-ahead included, and
-its children), the medians, and whether every box and pose is identical.
+its children), the medians, and whether every box and pose is identical. Each version plans
+its FFTs from a wisdom file of its own (made in its first run's warm-up), so a version that
+plans differently runs its own plans, not the other's.
 
 python benchmarks/ab_runs.py integration3
 python benchmarks/ab_runs.py HEAD~1 --runs 4 --processes 1
@@ -76,10 +78,13 @@ print(json.dumps({"package": os.path.dirname(autotrack.__file__), "rate": n / wa
 )
 
 
-def run_side(root: Path, sequence: Path, out: Path, processes: int, workdir: Path) -> dict:
+def run_side(
+    root: Path, sequence: Path, out: Path, processes: int, workdir: Path, wisdom: Path
+) -> dict:
     """One whole run with `root`'s `autotrack` package (started in `workdir`, so that no
-    checkout's package is found through the current directory)."""
-    env = dict(os.environ, PYTHONPATH=str(root))
+    checkout's package is found through the current directory) and `wisdom` as its FFTW
+    wisdom file."""
+    env = dict(os.environ, PYTHONPATH=str(root), AUTOTRACK_FFTW_WISDOM=str(wisdom))
     completed = subprocess.run(
         [sys.executable, "-c", RUN, str(sequence), str(out), str(processes)],
         cwd=workdir,
@@ -118,8 +123,9 @@ def main() -> int:
         for index in range(args.runs):
             order = list(sides) if index % 2 == 0 else list(sides)[::-1]
             for name in order:
-                out = work / f"{index}-{'base' if name != 'this' else 'this'}.npz"
-                result = run_side(sides[name], sequence, out, args.processes, work)
+                side = "base" if name != "this" else "this"
+                out, wisdom = work / f"{index}-{side}.npz", work / f"fftw-{side}.json"
+                result = run_side(sides[name], sequence, out, args.processes, work, wisdom)
                 runs[name].append(result)
                 print(
                     f"  {name:<14} {result['rate']:5.1f} frames/s, CPU {result['cpu_ms']:.1f} "
