@@ -152,3 +152,38 @@ def test_both_backends_compute_the_same_transforms():
         np.testing.assert_allclose(
             projected, np.fft.rfft2(spatial), rtol=0, atol=2e-4 * np.abs(expected).max()
         )
+
+
+_WARM_UP_SCRIPT = """
+import json
+from autotrack.params import TrackerParams
+from autotrack.tracker import fft_plans
+from autotrack.tracker.warmup import search_grid_sides, warm_up
+warm_up()
+print(json.dumps({
+    "planned": [[*shape, effort] for shape, effort in fft_plans.planned_shapes().items()],
+    "sides": list(search_grid_sides(TrackerParams())),
+}))
+"""
+
+
+def test_warm_up_plans_every_search_grid_so_a_first_box_never_searches(tmp_path):
+    """The app's warm-up plans the square grids of every search region size (38-50 cells) for
+    colour and grey features, in a process new to them; a tracker started after it plans its
+    grid from the wisdom (no search on the user's first box)."""
+    env = dict(os.environ, **{WISDOM_ENV: str(tmp_path / "wisdom.json")})
+    run = subprocess.run(
+        [sys.executable, "-c", _WARM_UP_SCRIPT], env=env, capture_output=True, text=True
+    )
+    assert run.returncode == 0, run.stderr
+    report = json.loads(run.stdout.strip().splitlines()[-1])
+    assert report["sides"] == list(range(38, 51))
+    planned = {(c, r, k): effort for c, r, k, effort in report["planned"]}
+    channel_counts = {c for c, _, _ in planned}
+    assert len(channel_counts) == 2  # colour and grey features
+    for channels in channel_counts:
+        for side in report["sides"]:
+            if not fft_plans.prefers_pocketfft(side):
+                assert planned[(channels, side, side)] == PLANNING_EFFORT
+    first_box = _plan_in_processes(tmp_path / "wisdom.json", (max(channel_counts), 48, 48))
+    assert first_box[0]["measured_seconds"] == 0.0

@@ -282,6 +282,12 @@ def _fall_back() -> None:
         pyfftw.import_wisdom(_planner.good_wisdom)
 
 
+def planned_shapes() -> dict[tuple[int, int, int], str]:
+    """(channels, rows, cols) -> effort of every FFTW shape this process has planned."""
+    with _planner.lock:
+        return dict(_planner.efforts)
+
+
 def last_measure_seconds() -> float:
     """Wall-clock seconds the last shape measured by this process took to plan (0 if none)."""
     return _planner.last_measure_seconds
