@@ -50,6 +50,8 @@ def search_grid_sides(params: TrackerParams) -> range:
 
 def plan_search_grids(params: TrackerParams, channels: int) -> None:
     """Plan the transforms of every square search grid of `channels` channels: from the wisdom
-    file, or searched once on a machine new to them (0.2-1.1 s a shape, `fft_plans`)."""
-    for side in search_grid_sides(params):
+    file, or searched once on a machine new to them (0.2-1.1 s a shape, `fft_plans`). The
+    largest grid first: every target whose search region reaches the largest size has it (13
+    of the 18 dev sequences), and a box drawn meanwhile waits at most for the shape at hand."""
+    for side in reversed(search_grid_sides(params)):
         fft_plans.plans_for(channels, (side, side))
