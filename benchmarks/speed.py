@@ -307,7 +307,7 @@ def print_startup(runs: int) -> None:
     else:
         detail = (
             f"first {' '.join(f'{t:.2f}' for t in firsts)} s (median {statistics.median(firsts):.2f};"
-            f" empty kernel cache and FFTW wisdom: compiles, measures plans), second {' '.join(f'{t:.2f}' for t in seconds)} s"
+            f" empty kernel cache and FFTW wisdom: compiles, searches FFT plans), second {' '.join(f'{t:.2f}' for t in seconds)} s"
             f" (median {statistics.median(seconds):.2f})"
         )
     load = os.getloadavg()

@@ -43,7 +43,7 @@ from autotrack.io.atomic import write_text
 
 try:
     import fcntl
-except ImportError:  # not POSIX: no lock, so no shared measured plans
+except ImportError:  # not POSIX: no lock, so no shared searched plans
     fcntl = None
 
 
