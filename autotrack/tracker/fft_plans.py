@@ -265,7 +265,7 @@ def plans_for(channels: int, grid_size: tuple[int, int]) -> PlanSet:
                 plans, effort = _plan_from_file(shape, path), PLANNING_EFFORT
                 _planner.good_wisdom = pyfftw.export_wisdom()
             except (OSError, ValueError) as error:
-                _log.warning("FFTW plans estimated, not measured (%s)", error)
+                _log.warning("FFTW plans estimated, not searched (%s)", error)
                 _fall_back()
         if _planner.disabled and effort != PLANNING_EFFORT:
             plans, effort = _make_plans(shape, ("FFTW_ESTIMATE",)), "FFTW_ESTIMATE"

@@ -25,8 +25,9 @@ class Speculation:
     def matches(self, frame: object) -> bool:
         """Whether `frame` is the frame speculated: the same read-only array object (as a
         pipeline's frame cache gives), or an array of values equal to what the children read
-        (values equal to that uint8 frame convert to it). A writeable array is compared by its values even when
-        it is the same object: its owner may have written the next frame into it since."""
+        (values equal to that uint8 frame convert to it). A writeable array is compared by its
+        values even when it is the same object: its owner may have written the next frame into
+        it since."""
         if frame is self.given and isinstance(frame, np.ndarray) and not frame.flags.writeable:
             return True
         return (
