@@ -411,6 +411,9 @@ def main() -> int:
     print(
         f"load average before the run: {load[0]:.1f} {load[1]:.1f} {load[2]:.1f} ({os.cpu_count()} cores)"
     )
+    from autotrack.machine import describe_machine, machine_line
+
+    print(f"machine: {machine_line(describe_machine())}")
 
     result = None
     if not args.skip_single:

@@ -25,6 +25,7 @@ from autotrack.evaluation.metrics import score_sequence
 from autotrack.evaluation.peers import TRACKER_NAMES, OpenCVPeer, make_tracker
 from autotrack.evaluation.runs import TaskResult, load_result, result_paths, single_thread
 from autotrack.io.otb_boxes import read_boxes
+from autotrack.machine import describe_machine, machine_line
 from tests.conftest import COLOUR_TABLE, SEQUENCES
 
 
@@ -222,6 +223,10 @@ def test_cli_bench_end_to_end(synthetic_root, tmp_path, capsys):
     assert (out / "kcf" / "right.txt").is_file() and (out / "mosse" / "down.txt").is_file()
     document = json.loads(summary.read_text())
     assert document["trackers"]["kcf"]["precision"] == pytest.approx(1.0)
+    # where the fps were measured: this machine, in the JSON and under the table
+    machine = document["machine"]
+    assert machine == json.loads(json.dumps(describe_machine()))
+    assert f"fps measured on: {machine_line(machine)}\n" in printed
     plots = sorted(path.name for path in (out / "plots").glob("*.png"))
     assert plots == [
         "precision.png",
@@ -232,7 +237,9 @@ def test_cli_bench_end_to_end(synthetic_root, tmp_path, capsys):
         "success_attribute_SV.png",
     ]
     assert main([*argv, "--no-progress"]) == 0
-    assert "0 runs tracked, 4 resumed" in capsys.readouterr().out
+    printed = capsys.readouterr().out
+    assert "0 runs tracked, 4 resumed" in printed
+    assert "(the 4 resumed runs': where they ran)" in printed
 
 
 def test_cli_bench_bad_input_is_one_line(synthetic_root, tmp_path, capsys):

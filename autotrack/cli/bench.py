@@ -90,6 +90,7 @@ def run(args: argparse.Namespace) -> int:
     from autotrack.evaluation.datasets import load_sequences
     from autotrack.evaluation.distributed import cluster_executor_for
     from autotrack.io.atomic import write_text
+    from autotrack.machine import describe_machine, machine_line
 
     check_output_file(args.json, "--json", force=args.force)
     trackers = validate_tracker_names(args.trackers.split(","))
@@ -107,14 +108,22 @@ def run(args: argparse.Namespace) -> int:
             executor=executor,
         )
     summaries = summarize_run(run_result)
+    # fps depend on the CPU: a local run names this machine, a cluster's workers are not known
+    machine = describe_machine() if args.scheduler is None else None
     print(
         f"{len(sequences)} sequences, {sum(len(s) for s in sequences)} frames; "
         f"{run_result.computed} runs tracked, {run_result.resumed} resumed from {args.out}"
     )
     print(format_table(summaries))
+    if machine is None:
+        print("fps measured on the cluster's workers (their CPUs are not recorded)")
+    else:
+        earlier = f" (the {run_result.resumed} resumed runs': where they ran)"
+        print(f"fps measured on: {machine_line(machine)}" + (earlier if run_result.resumed else ""))
     if args.json is not None:
         args.json.parent.mkdir(parents=True, exist_ok=True)
-        write_text(args.json, json.dumps(summary_json(summaries, args.root), indent=2) + "\n")
+        document = summary_json(summaries, args.root, machine)
+        write_text(args.json, json.dumps(document, indent=2) + "\n")
         print(f"summary: {args.json}")
     if args.plots:
         written = write_run_plots(summaries, args.out / "plots", title=args.root.name)

@@ -200,8 +200,14 @@ def _number(value: float, digits: int = 4) -> float | None:
     return round(float(value), digits) if math.isfinite(value) else None
 
 
-def summary_json(summaries: Mapping[str, TrackerSummary], root: str | Path | None = None) -> dict:
-    """The machine-readable summary written by `autotrack bench --json`."""
+def summary_json(
+    summaries: Mapping[str, TrackerSummary],
+    root: str | Path | None = None,
+    machine: Mapping[str, object] | None = None,
+) -> dict:
+    """The machine-readable summary written by `autotrack bench --json`. `machine`: where the
+    fps were measured (`autotrack.machine.describe_machine`; None: not recorded, e.g. on a
+    cluster's workers)."""
 
     def block(summary: SummaryScore) -> dict:
         return {
@@ -237,6 +243,7 @@ def summary_json(summaries: Mapping[str, TrackerSummary], root: str | Path | Non
         }
     return {
         "root": str(root) if root is not None else None,
+        "machine": dict(machine) if machine is not None else None,
         "thresholds": {
             "precision": PRECISION_THRESHOLDS.tolist(),
             "success": [round(float(t), 4) for t in SUCCESS_THRESHOLDS],

@@ -40,6 +40,7 @@ import scipy.fft
 
 from autotrack.compile_cache import cache_root
 from autotrack.io.atomic import write_text
+from autotrack.machine import read_cpuinfo
 
 try:
     import fcntl
@@ -115,18 +116,8 @@ def wisdom_path() -> Path:
 
 def _machine_key() -> str:
     """The CPU kind: FFTW wisdom names SIMD codelets, and a plan is only valid on like CPUs."""
-    found = {"model name": "", "flags": ""}  # the first CPU's: not the CPU count
-    try:
-        with open("/proc/cpuinfo", encoding="utf-8", errors="replace") as handle:
-            for line in handle:
-                key = line.split(":", 1)[0].strip()
-                if key in found and not found[key]:
-                    found[key] = line
-                if all(found.values()):
-                    break
-    except OSError:
-        pass
-    model = (platform.processor() or "") + found["model name"] + found["flags"]
+    found = read_cpuinfo(("model name", "flags"))  # the first CPU's lines: not the CPU count
+    model = (platform.processor() or "") + found.get("model name", "") + found.get("flags", "")
     digest = hashlib.sha256(model.encode()).hexdigest()[:12]
     return f"{platform.machine() or 'cpu'}-{digest}"
 
