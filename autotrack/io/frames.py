@@ -25,6 +25,7 @@ import cv2
 import numpy as np
 
 from autotrack.errors import InputError
+from autotrack.io.jpeg import decode_jpeg
 
 IMAGE_EXTENSIONS = frozenset({".jpg", ".jpeg", ".png", ".bmp", ".tif", ".tiff", ".webp"})
 """File extensions (lower case) read as frames."""
@@ -98,6 +99,9 @@ def read_image(path: Path, index: int | None = None, *, bgr: bool = False) -> np
         encoded = np.fromfile(path, dtype=np.uint8)
     except OSError as error:
         raise InputError(f"{label}cannot read image file {path}: {error.strerror}") from error
+    image = decode_jpeg(encoded, bgr=bgr)  # OpenCV's pixels, faster, already in order
+    if image is not None:
+        return image
     image = cv2.imdecode(encoded, cv2.IMREAD_ANYCOLOR) if encoded.size else None
     if image is None:
         raise InputError(f"{label}cannot decode image file {path} (corrupt or not an image)")
