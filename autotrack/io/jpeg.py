@@ -3,9 +3,9 @@
 OpenCV's `imdecode` and simplejpeg both decode with libjpeg-turbo, with its defaults (the
 accurate integer inverse DCT and fancy chroma upsampling), so a frame's pixels are the same
 bit for bit (`tests/test_jpeg.py` compares them on frames of every dev sequence and on
-every common sampling and coding). simplejpeg decodes a 1280x720 frame in ~40% of the time
-`imdecode` takes here (docs/benchmarks.md, thirteenth round), and straight into RGB or BGR, with
-no conversion after it.
+every common sampling and coding). Inside the pipeline simplejpeg decodes a 1280x720 frame in
+~5 ms where `imdecode` took ~6 (docs/benchmarks.md, thirteenth round), straight into RGB or
+BGR, with no conversion after it.
 
 OpenCV stays the decoder of what simplejpeg would decode differently or not at all: a file whose
 EXIF orientation OpenCV applies (any but 1, or an EXIF block this module cannot read), CMYK or
