@@ -101,13 +101,24 @@ def test_corrupt_frame_in_the_middle_names_the_frame(sequence_folder, tmp_path, 
     [
         ("1,2,3", "four numbers"),
         ("a,b,c,d", "four numbers"),
-        ("10,10,0,10", "zero size"),
-        ("5000,10,20,20", "outside"),
+        ("10,10,0,10", "--init 10,10,0,10 (1-based x,y,w,h) has zero size"),
+        ("5000,10,20,20", "--init 5000,10,20,20 (1-based x,y,w,h) lies outside"),
+        ("nan,10,20,20", "--init nan,10,20,20 (1-based x,y,w,h) must be four finite numbers"),
     ],
 )
 def test_bad_init_boxes(sequence_folder, capsys, init, message):
+    """Each message quotes the box as the user typed it (1-based), not the tracker's 0-based
+    values."""
     assert main(["track", str(sequence_folder), "--init", init, "--quiet"]) == 2
     assert message in _error_line(capsys)
+
+
+def test_init_box_at_the_image_edge_is_checked_in_the_typed_convention(sequence_folder, capsys):
+    """The centre of 1-based x = 1, w = 1 is 0-based 0.5: inside; of x = 0, w = 1 is -0.5."""
+    assert main(["track", str(sequence_folder), "--init", "1,1,1,1", "--quiet"]) == 0
+    capsys.readouterr()
+    assert main(["track", str(sequence_folder), "--init", "0,1,1,1", "--quiet"]) == 2
+    assert "--init 0,1,1,1 (1-based x,y,w,h) lies outside" in _error_line(capsys)
 
 
 def test_unreadable_video_and_missing_colour_table(tmp_path, sequence_folder, capsys):

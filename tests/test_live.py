@@ -174,3 +174,6 @@ def test_live_sources_need_realtime_and_bad_sources_are_one_line(video, tmp_path
     assert "--frame-log records live runs: add --realtime" in capsys.readouterr().err
     assert main(["track", str(path), "--realtime"]) == 2
     assert "give the initial box with --init" in capsys.readouterr().err
+    # A box outside the video's frames, in the 1-based convention the user typed.
+    assert main(["track", str(path), "--realtime", "--init", "900,10,20,20", "--quiet"]) == 2
+    assert "--init 900,10,20,20 (1-based x,y,w,h) lies outside" in capsys.readouterr().err

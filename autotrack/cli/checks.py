@@ -1,4 +1,4 @@
-"""Checks every command makes before any work starts: output paths and numeric options.
+"""Checks every command makes before any work starts: output paths, numeric options, boxes.
 
 A run that tracks every frame and then cannot write its result loses it all, so an output path
 that cannot be written (a folder, a read-only place, a missing parent that cannot be made) or
@@ -11,7 +11,10 @@ import math
 import os
 from pathlib import Path
 
-from autotrack.errors import InputError
+import numpy as np
+
+from autotrack.errors import BoxError, InputError
+from autotrack.tracker.inputs import validate_box
 
 
 def _nearest_existing(path: Path) -> Path:
@@ -54,3 +57,23 @@ def finite(value: float | None, option: str, *, low: float = -math.inf, high: fl
         bounds = f" in ({low:g}, {high:g}]" if math.isfinite(high) else f" above {low:g}"
         raise InputError(f"{option} must be a finite number{bounds}, got {value!r}")
     return value
+
+
+def parse_box(text: str) -> tuple[float, float, float, float]:
+    """'x,y,w,h' -> four floats, with a message naming what is wrong."""
+    fields = [field.strip() for field in text.replace(" ", ",").split(",") if field.strip()]
+    if len(fields) != 4:
+        raise BoxError(f"--init must be four numbers x,y,w,h; got {text!r}")
+    try:
+        x, y, w, h = (float(field) for field in fields)
+    except ValueError as error:
+        raise BoxError(f"--init must be four numbers x,y,w,h; got {text!r}") from error
+    return (x, y, w, h)
+
+
+def init_box(text: str, frame_size_wh: tuple[int, int]) -> np.ndarray:
+    """The 0-based box of `--init TEXT` (1-based x,y,w,h), checked against the frame size with
+    messages that quote what the user typed."""
+    box = np.array(parse_box(text)) - np.array([1.0, 1.0, 0.0, 0.0])
+    validate_box(box, frame_size_wh, name=f"--init {text} (1-based x,y,w,h)")
+    return box

@@ -13,7 +13,8 @@ from typing import Any
 import numpy as np
 from tqdm import tqdm
 
-from autotrack.errors import InputError
+from autotrack.cli.checks import init_box
+from autotrack.errors import BoxError, InputError
 
 
 def add_live_arguments(parser: argparse.ArgumentParser) -> None:
@@ -57,21 +58,26 @@ def _finish(summary: Any, frame_log: Path | None) -> None:
         print(f"frame log written to {frame_log}")
 
 
-def run_track_live(args: argparse.Namespace, params: Any, init_box: np.ndarray | None) -> int:
+def run_track_live(args: argparse.Namespace, params: Any) -> int:
     """`autotrack track SOURCE --realtime`: boxes of the processed frames, NaN rows for the
     dropped ones, and the drop/latency report."""
     from autotrack.io.live import LiveReader, describe_source
     from autotrack.io.otb_boxes import write_boxes
     from autotrack.pipeline.live import track_live, warm_up
 
-    if init_box is None:
+    if args.init is None:
         raise InputError("live input has no ground truth: give the initial box with --init x,y,w,h")
     reader = LiveReader(args.sequence, fps=args.fps)
-    warm_up(params, reader.frame_size, [init_box])
+    try:
+        first_box = init_box(args.init, reader.frame_size)
+    except BoxError:
+        reader.close()
+        raise
+    warm_up(params, reader.frame_size, [first_box])
     progress = tqdm(unit="frame", desc=describe_source(args.sequence), disable=args.quiet)
     with reader, progress:
         boxes, summary = track_live(
-            reader, params, init_box, on_result=lambda frame, outcome: progress.update()
+            reader, params, first_box, on_result=lambda frame, outcome: progress.update()
         )
     if args.out is not None:
         args.out.parent.mkdir(parents=True, exist_ok=True)

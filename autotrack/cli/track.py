@@ -9,27 +9,15 @@ from pathlib import Path
 import numpy as np
 from tqdm import tqdm
 
-from autotrack.cli.checks import check_output_file
+from autotrack.cli.checks import check_output_file, init_box
 from autotrack.cli.live import add_live_arguments, check_source, run_track_live
-from autotrack.errors import BoxError, InputError
+from autotrack.errors import InputError
 from autotrack.evaluation.datasets import GROUND_TRUTH_FILE
 from autotrack.evaluation.metrics import score_sequence
 from autotrack.io.frames import open_frames
 from autotrack.io.live import source_argument
 from autotrack.io.otb_boxes import read_boxes, write_boxes
 from autotrack.params import PRESETS, preset
-
-
-def parse_box(text: str) -> tuple[float, float, float, float]:
-    """'x,y,w,h' -> four floats, with a message naming what is wrong."""
-    fields = [field.strip() for field in text.replace(" ", ",").split(",") if field.strip()]
-    if len(fields) != 4:
-        raise BoxError(f"--init must be four numbers x,y,w,h; got {text!r}")
-    try:
-        x, y, w, h = (float(field) for field in fields)
-    except ValueError as error:
-        raise BoxError(f"--init must be four numbers x,y,w,h; got {text!r}") from error
-    return (x, y, w, h)
 
 
 def add_parser(subparsers: argparse._SubParsersAction) -> None:
@@ -86,14 +74,13 @@ def run(args: argparse.Namespace) -> int:
         raise InputError(f"Color Names table not found: {args.colour_table}")
     check_source(args)
     if args.realtime:
-        init_box = None if args.init is None else np.array(parse_box(args.init)) - [1, 1, 0, 0]
-        return run_track_live(args, preset(args.preset, args.colour_table), init_box)
+        return run_track_live(args, preset(args.preset, args.colour_table))
     frames = open_frames(args.sequence)
     ground_truth = _ground_truth(args.sequence)
     if args.init is not None:
-        init_box = np.array(parse_box(args.init)) - np.array([1.0, 1.0, 0.0, 0.0])
+        first_box = init_box(args.init, frames.frame_size)
     elif ground_truth is not None:
-        init_box = ground_truth[0]
+        first_box = ground_truth[0]
     else:
         raise InputError(
             f"{args.sequence} has no {GROUND_TRUTH_FILE}: give the initial box with --init x,y,w,h"
@@ -107,7 +94,7 @@ def run(args: argparse.Namespace) -> int:
         progress,
         Pipeline(frames, preset(args.preset, args.colour_table), map_window=0) as pipeline,
     ):
-        target_id = pipeline.add_target(0, tuple(init_box), landmark_id=None)
+        target_id = pipeline.add_target(0, tuple(first_box), landmark_id=None)
         for outcome in pipeline.run():
             boxes[outcome.frame_index] = outcome.tracks[target_id].box
             progress.update()

@@ -10,22 +10,30 @@ import numpy as np
 from autotrack.errors import BoxError, InputError
 
 
-def validate_box(box: Sequence[float], image_size_wh: tuple[int, int]) -> tuple[float, ...]:
-    """Check an initial (x, y, w, h) box: finite, positive size, centre inside the image."""
+def validate_box(
+    box: Sequence[float], image_size_wh: tuple[int, int], name: str | None = None
+) -> tuple[float, ...]:
+    """Check an initial (x, y, w, h) box: finite, positive size, centre inside the image.
+
+    `name` is how the messages call the box (default: "box" and its values), for a caller whose
+    user typed it in another convention (the CLI's 1-based `--init`).
+    """
     try:
         values = tuple(float(v) for v in box)
     except (TypeError, ValueError) as error:
         raise BoxError(f"box must be four numbers x, y, w, h; got {box!r}") from error
     if len(values) != 4 or not all(math.isfinite(v) for v in values):
-        raise BoxError(f"box must be four finite numbers x, y, w, h; got {box!r}")
+        shown = name or f"box {values}"
+        raise BoxError(f"{shown} must be four finite numbers x, y, w, h")
     x, y, w, h = values
+    shown = name or f"box {values}"
     if w < 1 or h < 1:
-        raise BoxError(f"box {values} has zero size: width and height must be at least 1 pixel")
+        raise BoxError(f"{shown} has zero size: width and height must be at least 1 pixel")
     width, height = image_size_wh
     cx, cy = x + w / 2.0, y + h / 2.0
     if not (0 <= cx < width and 0 <= cy < height):
         raise BoxError(
-            f"box {values} lies outside the {width}x{height} image (its centre must be inside)"
+            f"{shown} lies outside the {width}x{height} image (its centre must be inside)"
         )
     return values
 
