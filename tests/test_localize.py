@@ -418,6 +418,12 @@ def test_cli_localize_reports_bad_input_in_one_line(short_sequence, tmp_path, ca
     unknown.write_text('{"Z": [1, 2, 30, 30]}')
     assert main(["localize", str(short_sequence), "--init", str(unknown), "--quiet"]) == 2
     assert "unknown landmark 'Z'" in capsys.readouterr().err
+    outside = tmp_path / "outside.json"
+    outside.write_text('{"C": [5000, 2, 30, 30]}')
+    assert main(["localize", str(short_sequence), "--init", str(outside), "--quiet"]) == 2
+    assert (
+        "error: landmark C: box (5000.0, 2.0, 30.0, 30.0) lies outside" in capsys.readouterr().err
+    )
     assert main(["localize", str(tmp_path), "--quiet"]) == 2
     assert "give --scene" in capsys.readouterr().err
 

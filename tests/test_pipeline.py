@@ -190,6 +190,13 @@ def test_edits_are_checked_before_anything_changes(scene, tmp_path) -> None:
             run.add_target(60, BOXES["B"])
         with pytest.raises(InputError, match="no target 'T9'"):
             run.place_box("T9", 0, BOXES["B"])
+        # A refused box names what it was drawn for.
+        with pytest.raises(InputError, match=r"^landmark B: box \(5000.0, 10.0, 20.0, 20.0\) lies"):
+            run.add_targets(0, {"B": (5000, 10, 20, 20)})
+        with pytest.raises(InputError, match=r"^T1: box \(10.0, 10.0, 0.0, 5.0\) has zero size"):
+            run.place_box("T1", 0, (10, 10, 0, 5))
+        with pytest.raises(InputError, match=r"^box \(-900.0, 10.0, 20.0, 20.0\) lies"):
+            run.add_target(0, (-900, 10, 20, 20), landmark_id=None)
         assert list(run.targets) == ["T1"]
         assert math.isfinite(run.frame_seconds[0])
 

@@ -36,6 +36,7 @@ from autotrack.pipeline.targets import (
     FrameOutcome,
     TrackedTarget,
     check_landmark,
+    checked_box,
     free_numbers,
     grown,
 )
@@ -43,7 +44,6 @@ from autotrack.result import PoseEstimate, TrackResult
 from autotrack.sessions import Session, SessionRecorder
 from autotrack.sessions.maps import FrameMaps, SessionMaps
 from autotrack.sessions.messages import landmark_positions
-from autotrack.tracker.inputs import validate_box
 from autotrack.tracker.target_process import WorkerPool
 
 Box = tuple[float, float, float, float]
@@ -260,9 +260,12 @@ class Pipeline:
         for _, landmark in entries:
             check_landmark(self.scene, self.targets.values(), landmark, None)
         numbers = free_numbers({t.number for t in self.targets.values()}, len(entries))
+        frame = self.frame(frame_index)
         boxes = {
-            f"T{number}": self._checked_box(box, frame_index)
-            for number, (box, _) in zip(numbers, entries, strict=True)
+            f"T{number}": checked_box(
+                frame, box, None if landmark is None else f"landmark {landmark}"
+            )
+            for number, (box, landmark) in zip(numbers, entries, strict=True)
         }
         results = self._timed_start(frame_index, boxes)
         self._embed_frame(frame_index)
@@ -284,7 +287,7 @@ class Pipeline:
         """
         target = self._target(target_id)
         self._check_frame(frame_index)
-        box = self._checked_box(box, frame_index)
+        box = checked_box(self.frame(frame_index), box, target_id)
         corrected = frame_index in target.results
         result = self._timed_start(frame_index, {target_id: box})[target_id]
         self._restart(target, result)
@@ -320,12 +323,6 @@ class Pipeline:
         self._forget_poses_from(min(target.results, default=0))
         self._log_event("landmark_assigned", frame_index, target_id, landmark_id=landmark_id)
         self._estimate_pose(frame_index)
-
-    def _checked_box(self, box: Box, frame_index: int) -> Box:
-        """The box as four floats, checked against its frame as the tracker will."""
-        height, width = self.frame(frame_index).shape[:2]
-        x, y, w, h = validate_box(box, (width, height))
-        return (x, y, w, h)
 
     def _check_frame(self, frame_index: int) -> None:
         if not 0 <= frame_index < self.frame_count:

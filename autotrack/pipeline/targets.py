@@ -7,16 +7,30 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from autotrack.errors import InputError
+from autotrack.errors import BoxError, InputError
 from autotrack.localization.scene import Scene
 from autotrack.pipeline.history import ResultHistory
 from autotrack.pipeline.posing import SolverInput
 from autotrack.result import PoseEstimate, TrackResult
+from autotrack.tracker.inputs import validate_box
 
 Box = tuple[float, float, float, float]
 
 SIGNAL_NAMES = ("peak_score", "global_variation", "theta_ref", "theta", "aberrant")
 """Per-target, per-frame numbers kept as arrays over the sequence (for plots)."""
+
+
+def checked_box(frame: np.ndarray, box: Box, owner: str | None = None) -> Box:
+    """The box as four floats, checked against its frame as the tracker will; a refusal names
+    `owner` (the landmark or target the box is for), when given."""
+    height, width = frame.shape[:2]
+    try:
+        x, y, w, h = validate_box(box, (width, height))
+    except BoxError as error:
+        if owner is None:
+            raise
+        raise BoxError(f"{owner}: {error}") from None
+    return (x, y, w, h)
 
 
 def free_numbers(taken: set[int], count: int) -> list[int]:
