@@ -338,7 +338,7 @@ class TabController(SessionCommands):
             self.truth_target = run.add_target(self.cursor, box, None)
         self.message = (
             f"{self.truth_target} started from the ground truth at frame {self.cursor + 1}; "
-            "play to score it (Debugging → Ground truth)."
+            "its scores grow as it tracks (Debugging → Ground truth)."
         )
         self.claim_recording()
 
