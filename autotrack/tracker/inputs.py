@@ -22,11 +22,10 @@ def validate_box(
         values = tuple(float(v) for v in box)
     except (TypeError, ValueError) as error:
         raise BoxError(f"box must be four numbers x, y, w, h; got {box!r}") from error
+    shown = name or f"box {values}"
     if len(values) != 4 or not all(math.isfinite(v) for v in values):
-        shown = name or f"box {values}"
         raise BoxError(f"{shown} must be four finite numbers x, y, w, h")
     x, y, w, h = values
-    shown = name or f"box {values}"
     if w < 1 or h < 1:
         raise BoxError(f"{shown} has zero size: width and height must be at least 1 pixel")
     width, height = image_size_wh
