@@ -306,3 +306,39 @@ def test_ab_tracker_overrides_take_each_parameters_type():
     assert parse_overrides("") == {}
     with pytest.raises(ValueError, match="no tracker parameter 'rotation'"):
         parse_overrides("rotation=10")
+
+
+def test_cost_curve_image_sizes_track_the_same_content():
+    from benchmarks.cost_curve import _SlidingTexture
+
+    frames = 60
+    small, large = _SlidingTexture(640, 360, frames), _SlidingTexture(1920, 1080, frames)
+    # The one-target points' box sits at the image's centre, which stays at one texture
+    # position as the texture slides; around it (search region and scale samples of a 60 px
+    # box, +-150 px) both image sizes hold the same pixels.
+    around_small = small.texture[180 - 165 : 180 + 165, 320 - 200 : 320 + 200]
+    around_large = large.texture[540 - 165 : 540 + 165, 960 - 200 : 960 + 200]
+    assert np.array_equal(around_small, around_large)
+    # ... and only there: the rest is each size's own noise.
+    assert not np.array_equal(small.texture[:40, :40], large.texture[:40, :40])
+    # Frame k is the texture moved by (1, 2) px a frame.
+    assert np.array_equal(small.frame(3)[:-3, :-6], small.frame(0)[3:, 6:])
+
+
+def test_cost_curve_runs_every_point_in_alternating_passes_and_keeps_the_fastest(monkeypatch):
+    from benchmarks import cost_curve
+
+    order = []
+
+    def fake_run(**point):
+        order.append(tuple(point.values()))
+        return {"ms_per_frame": 10.0 - len(order) % 3}
+
+    monkeypatch.setattr(cost_curve, "run_point", fake_run)
+    runs = cost_curve.measure_all(frames=7, repeats=3)
+    points = cost_curve._points(7)
+    # The points the tables share (one 60x60 target, 1280x720, one thread) are measured once.
+    assert len(points) == len(set(points)) == 7 + 4 + 8 - 2
+    assert order == points + points[::-1] + points
+    assert all(len(results) == 3 for results in runs.values())
+    assert cost_curve._ms([{"ms_per_frame": t} for t in (9.5, 6.25, 8.0)]) == "6.25 (slowest 9.50)"
