@@ -159,6 +159,12 @@ _NUMBA_TARGET_MODULES = (  # imported only by numba's CPU-target refresh
     "numba.typed.typeddict",
     "numba.np.random.generator_core",
 )
+_SCIPY_SUBPACKAGES = (  # the tracker loads the compiled modules it uses without these
+    "scipy.fft",
+    "scipy.linalg",
+    "scipy.special",
+    "scipy.fftpack",
+)
 
 _TRACK_AND_REPORT = (
     "import sys, json\n"
@@ -182,11 +188,14 @@ def test_second_process_loads_kernels_without_numba_target_refresh(tmp_path):
     """A first process with empty caches compiles; the second tracks the same frames without
     numba's target refresh (the implementation modules it imports stay unloaded), with the
     same boxes bit for bit, and numba still compiles a new function there (which refreshes the
-    target itself). Also the lab11 table is kept in the user cache by the first process."""
+    target itself). Nor does it import scipy's fft, linalg, special or fftpack subpackages
+    (pocketfft's binding and cython_blas are loaded alone, `scipy_binaries`). Also the lab11
+    table is kept in the user cache by the first process."""
     folder = shared_sequence_dir("DTB70", "Surfing06")
     env = dict(os.environ, NUMBA_CACHE_DIR=str(tmp_path / "numba"))
     env[compile_cache.CACHE_ENV] = str(tmp_path / "cache")
-    command = [sys.executable, "-c", _TRACK_AND_REPORT, str(folder), *_NUMBA_TARGET_MODULES]
+    watched = [*_NUMBA_TARGET_MODULES, *_SCIPY_SUBPACKAGES]
+    command = [sys.executable, "-c", _TRACK_AND_REPORT, str(folder), *watched]
     runs = []
     for _ in range(2):
         done = subprocess.run(command, env=env, capture_output=True, text=True)

@@ -10,7 +10,6 @@ from __future__ import annotations
 from functools import lru_cache
 
 import numpy as np
-import scipy.linalg
 
 COLOUR_TABLE_ROWS = 32 * 32 * 32
 """Rows of a colour lookup table: one per RGB bin R//8 + 32 (G//8) + 1024 (B//8)."""
@@ -110,7 +109,11 @@ def lab11_projection() -> np.ndarray:
 
     The 11 probabilities sum to one, so projecting onto this basis loses nothing:
     p = projection.T @ feature + 1/11.
+
+    scipy.linalg is imported here, on first use, not by every tracker process at start-up.
     """
+    import scipy.linalg
+
     basis = scipy.linalg.helmert(len(COLOUR_TERMS))
     basis.flags.writeable = False
     return basis

@@ -1,6 +1,6 @@
 """The correlation filter: label, window, ADMM training and detection.
 
-All spectra are real-input half spectra (`scipy.fft.rfft2` over the two grid axes, the last grid
+All spectra are real-input half spectra (pocketfft's `rfft2` over the two grid axes, the last grid
 axis halved). Every operation of the release is per frequency or a real-valued spatial product,
 so the half spectrum gives the same filter as the release's full complex spectrum (up to float
 rounding and the Nyquist bin, which a real signal forces to be real).
@@ -16,13 +16,10 @@ from dataclasses import dataclass
 from functools import lru_cache
 
 import numpy as np
-import scipy.fft
 from numba import njit
 
-from autotrack.tracker import admm_kernels, fft_plans
+from autotrack.tracker import admm_kernels, fft_plans, pocketfft
 from autotrack.tracker.fft_plans import pyfftw
-
-_FFT_AXES = (-2, -1)
 
 
 def matlab_round(values: np.ndarray | float) -> np.ndarray:
@@ -69,12 +66,12 @@ def cosine_window(grid_size: tuple[int, int]) -> np.ndarray:
 
 def to_spectrum(features: np.ndarray) -> np.ndarray:
     """Half spectrum of real maps (..., rows, cols) -> complex64 (..., rows, cols // 2 + 1)."""
-    return scipy.fft.rfft2(features, axes=_FFT_AXES, workers=1).astype(np.complex64, copy=False)
+    return pocketfft.rfft2(features).astype(np.complex64, copy=False)
 
 
 def from_spectrum(spectrum: np.ndarray, grid_size: tuple[int, int]) -> np.ndarray:
     """Real maps from half spectra (the inverse of `to_spectrum`)."""
-    return scipy.fft.irfft2(spectrum, s=grid_size, axes=_FFT_AXES, workers=1)
+    return pocketfft.irfft2(spectrum, grid_size)
 
 
 class SpectrumTransform:
@@ -446,7 +443,7 @@ def newton_peak(response: np.ndarray, iterations: int) -> tuple[float, float, fl
     [-n/2, n/2).
     """
     rows, cols = response.shape
-    response_f = scipy.fft.fft2(response, workers=1).astype(np.complex128)
+    response_f = pocketfft.fft2(response).astype(np.complex128)
     peak_index = int(response.argmax())
     peak_row, peak_col = divmod(peak_index, cols)
     init_score = float(response[peak_row, peak_col])

@@ -36,11 +36,11 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
-import scipy.fft
 
 from autotrack.compile_cache import cache_root
 from autotrack.io.atomic import write_text
 from autotrack.machine import read_cpuinfo
+from autotrack.tracker import pocketfft
 
 try:
     import fcntl
@@ -49,17 +49,19 @@ except ImportError:  # not POSIX: no lock, so no shared searched plans
 
 
 def _import_pyfftw():
-    """pyFFTW without its dask interface: when dask is installed, `import pyfftw` imports
-    dask.array (~0.4 s of a fresh process's start-up) for `pyfftw.interfaces.dask_fft`, which
-    the tracker never uses. A None entry in sys.modules makes that optional import fail fast."""
-    blocked = "dask.array.fft" not in sys.modules
-    if blocked:
-        sys.modules["dask.array.fft"] = None
+    """pyFFTW without its dask and scipy interfaces, which the tracker never uses: when they are
+    installed, `import pyfftw` imports dask.array (~0.4 s of a fresh process's start-up) for
+    `pyfftw.interfaces.dask_fft`, and scipy.fftpack, which imports scipy.fft and scipy.linalg
+    (~0.35 s), for `pyfftw.interfaces.scipy_fft(pack)`. A None entry in sys.modules makes those
+    optional imports fail fast; a module already imported is left alone."""
+    blocked = [name for name in ("dask.array.fft", "scipy.fftpack") if name not in sys.modules]
+    for name in blocked:
+        sys.modules[name] = None
     try:
         import pyfftw
     finally:
-        if blocked:
-            del sys.modules["dask.array.fft"]
+        for name in blocked:
+            del sys.modules[name]
     return pyfftw
 
 
@@ -214,7 +216,7 @@ def prefers_pocketfft(side: int) -> bool:
 
 
 class PocketPlan:
-    """scipy.fft's pocketfft behind the part of a pyFFTW plan the tracker uses: an input array
+    """pocketfft behind the part of a pyFFTW plan the tracker uses: an input array
     of its own, and a call that transforms it (or the array given) into a new array (an output
     array, if given, is not used)."""
 
@@ -225,8 +227,8 @@ class PocketPlan:
     def __call__(self, input_array: np.ndarray | None = None, output_array=None) -> np.ndarray:
         source = self.input_array if input_array is None else input_array
         if self._inverse_size is None:
-            return scipy.fft.rfft2(source, axes=_AXES, workers=1)
-        return scipy.fft.irfft2(source, s=self._inverse_size, axes=_AXES, workers=1)
+            return pocketfft.rfft2(source)
+        return pocketfft.irfft2(source, self._inverse_size)
 
 
 def _pocket_plans(shape: tuple[int, int, int]) -> PlanSet:

@@ -8,6 +8,11 @@ allocate arrays call) is the only part of that initialisation a loaded kernel us
 compiler still refreshes the target itself before it compiles anything (a cache miss, a new
 signature, another library's kernel), so deferring the refresh changes what is imported when,
 never which code runs: the kernels are the same bytes from the same cache.
+
+Loading a kernel that uses numpy's linear algebra runs numba's BLAS check, `import
+scipy.linalg.cython_blas`, which imports all of scipy.linalg first (~0.1-0.3 s). The check only
+needs the compiled module, so it is loaded from its file beforehand (`scipy_binaries`) and the
+check finds it there.
 """
 
 from __future__ import annotations
@@ -18,6 +23,8 @@ from types import ModuleType
 from numba.core.caching import FunctionCache
 from numba.core.dispatcher import Dispatcher
 from numba.core.runtime import nrt
+
+from autotrack.tracker.scipy_binaries import load_compiled
 
 
 class _CacheWithoutRefresh(FunctionCache):
@@ -42,6 +49,7 @@ def load_without_refresh(*modules: ModuleType) -> int:
     without numba's target refresh; returns how many kernels now do."""
     if not _supported():
         return 0
+    load_compiled("scipy.linalg.cython_blas")  # what numba's BLAS check imports
     count = 0
     for module in modules:
         for value in vars(module).values():

@@ -15,10 +15,9 @@ from __future__ import annotations
 import math
 
 import numpy as np
-import scipy.fft
 
 from autotrack.params import TrackerParams
-from autotrack.tracker import dcf
+from autotrack.tracker import dcf, pocketfft
 from autotrack.tracker.features import feature_maps
 from autotrack.tracker.sampling import search_patch
 
@@ -45,10 +44,10 @@ def placement_response(filter_spatial: np.ndarray, feature_maps: np.ndarray) -> 
     _, big_rows, big_cols = feature_maps.shape
     if big_rows < rows or big_cols < cols:
         raise ValueError("the feature maps must be at least as large as the filter")
-    filter_f = scipy.fft.rfft2(filter_spatial, s=(big_rows, big_cols), workers=1)
-    maps_f = scipy.fft.rfft2(feature_maps, workers=1)
-    correlation = scipy.fft.irfft2(
-        np.einsum("krc,krc->rc", np.conj(filter_f), maps_f), s=(big_rows, big_cols), workers=1
+    filter_f = pocketfft.rfft2(filter_spatial, (big_rows, big_cols))
+    maps_f = pocketfft.rfft2(feature_maps)
+    correlation = pocketfft.irfft2(
+        np.einsum("krc,krc->rc", np.conj(filter_f), maps_f), (big_rows, big_cols)
     )
     return correlation[: big_rows - rows + 1, : big_cols - cols + 1]
 

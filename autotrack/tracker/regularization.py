@@ -4,10 +4,8 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable
-from functools import lru_cache
 
 import numpy as np
-import scipy.linalg
 from numba import njit
 
 from autotrack.tracker.dcf import half_spectrum_weights
@@ -114,33 +112,15 @@ def global_variation(variation: np.ndarray) -> float:
     """Global variation eta = ||Pi||_2 * 1e-4, with MATLAB's matrix 2-norm (largest singular value).
 
     Returns inf when Pi has non-finite entries (a numerical blow-up counts as an aberrance).
-    The singular values are `scipy.linalg.svdvals`'s: the same LAPACK routine (gesdd) with the
-    same workspace size on the same float64 matrix, called without svdvals' argument handling.
+    The singular values are LAPACK's gesdd on the float64 matrix without vectors, as
+    `scipy.linalg.svdvals` computes them (tests/test_update_glue.py compares the two bit for
+    bit), through numpy, whose linalg is imported anyway, rather than scipy.linalg (~0.1-0.3 s
+    of a fresh process's start-up).
     """
     if not np.isfinite(variation).all():
         return float("inf")
-    gesdd, lwork = _singular_value_routine(*variation.shape)
-    matrix = np.asfortranarray(variation, dtype=np.float64)  # the copy LAPACK may overwrite
-    _, singular_values, _, info = gesdd(
-        matrix, compute_uv=0, lwork=lwork, full_matrices=1, overwrite_a=1
-    )
-    if info != 0:
-        raise np.linalg.LinAlgError(f"SVD did not converge (gesdd info {info})")
+    singular_values = np.linalg.svd(variation.astype(np.float64), compute_uv=False)
     return float(singular_values[0]) * GLOBAL_VARIATION_SCALE
-
-
-@lru_cache(maxsize=16)
-def _singular_value_routine(rows: int, cols: int):
-    """(gesdd, lwork) as `scipy.linalg.svd(compute_uv=False)` picks them for a float64
-    rows x cols matrix: the routine for that dtype and its optimal workspace size."""
-    probe = np.empty((rows, cols), np.float64)
-    gesdd, gesdd_lwork = scipy.linalg.get_lapack_funcs(
-        ("gesdd", "gesdd_lwork"), (probe,), ilp64="preferred"
-    )
-    work, info = gesdd_lwork(rows, cols, compute_uv=0, full_matrices=1)
-    if info != 0:
-        raise ValueError(f"gesdd_lwork failed for a {rows} x {cols} matrix (info {info})")
-    return gesdd, int(work.real)
 
 
 def temporal_reference(eta: float, zeta: float, nu: float) -> float:

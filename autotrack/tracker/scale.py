@@ -5,10 +5,10 @@ from __future__ import annotations
 import math
 
 import numpy as np
-import scipy.fft
 from numba import njit
 
 from autotrack.params import TrackerParams
+from autotrack.tracker import pocketfft
 from autotrack.tracker.features import scale_features
 from autotrack.tracker.sampling import scale_patches
 
@@ -25,7 +25,7 @@ def half_spectrum(samples: np.ndarray) -> np.ndarray:
     """FFT along the scale axis of real (scales, dims) samples, non-negative frequencies only:
     (scales // 2 + 1, dims) complex64, equal in value to the first rows of the full FFT
     (pocketfft computes a real input's full FFT by this real transform)."""
-    return scipy.fft.rfft(samples, axis=0, workers=1)
+    return pocketfft.rfft(samples, axis=0)
 
 
 @njit(cache=True, nogil=True, fastmath=False)
@@ -87,7 +87,7 @@ class ScaleFilter:
         self.scale_steps = params.scale_step ** (centre - np.arange(1, n + 1))
         offsets = np.arange(1, n + 1) - centre
         sigma = math.sqrt(n) * params.scale_sigma_factor
-        self.label_f = scipy.fft.fft(np.exp(-0.5 * offsets**2 / sigma**2)).astype(np.complex64)
+        self.label_f = pocketfft.fft(np.exp(-0.5 * offsets**2 / sigma**2)).astype(np.complex64)
         window = symmetric_hann(n + 1)[1:] if n % 2 == 0 else symmetric_hann(n)
         self.window = window.astype(np.float32)
         target_area = float(np.prod(initial_target_size_hw))
@@ -154,7 +154,7 @@ class ScaleFilter:
         )
         mirrored = n - samples_f.shape[0]
         response_f[samples_f.shape[0] :] = np.conj(response_f[mirrored:0:-1])
-        return scipy.fft.ifft(response_f, workers=1).real
+        return pocketfft.ifft(response_f).real
 
     def _shifted_samples(self, image, position, scale: float, best: int) -> np.ndarray:
         """The release's reuse of the detection samples shifted by the chosen scale index."""
