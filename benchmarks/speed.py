@@ -273,17 +273,21 @@ print(time.time())
 """
 
 
-def time_to_first_frame(cache_dir: Path) -> float:
+def time_to_first_frame(cache_dir: Path, source: Path | None = None) -> float:
     """Seconds from launching `python` to its first tracked frame (kernel cache, FFTW wisdom and
     the user cache of built tables in cache_dir: the first process compiles and measures its
-    plans, the second loads them)."""
+    plans, the second loads them). `source`: a folder holding another `autotrack/` to import
+    (run from there, so it comes first on the import path); this checkout's when None."""
     env = dict(os.environ, NUMBA_CACHE_DIR=str(cache_dir), AUTOTRACK_CACHE_DIR=str(cache_dir))
     env.pop("AUTOTRACK_FFTW_WISDOM", None)
+    if source is not None:
+        env["PYTHONPATH"] = str(source)
     sequence = SHARED / "sequences" / "UAV123_10fps" / "building5"
     start = time.time()
     done = subprocess.run(
         [sys.executable, "-c", _FIRST_FRAME_SCRIPT, str(sequence)],
         env=env,
+        cwd=source,
         capture_output=True,
         text=True,
         check=True,
