@@ -146,7 +146,8 @@ def main() -> int:
     for side, label in zip(sides, (args.revision, "this"), strict=True):
         print(
             f"  {label:<14} main thread CPU {statistics.median(side.cpu) * 1e3:6.3f} ms a frame, "
-            f"outside the trackers {statistics.median(side.outside) * 1e3:6.3f} ms, "
+            f"outside the trackers {statistics.median(side.outside) * 1e3:6.3f} ms "
+            f"(slowest frame {max(side.outside) * 1e3:.1f} ms), "
             f"wall {statistics.median(side.wall) * 1e3:6.3f} ms"
         )
     base, new = sides

@@ -2,9 +2,11 @@
 thread, in one process, over the speed benchmark's rendered 1280x720 sequence.
 
 Prints the CPU milliseconds per frame of the pipeline's parts (tracking, decoding, the pose,
-the rest) and the profile's largest entries by their own time. cProfile sees this thread only:
-the frames `FrameCache` reads ahead are decoded on another thread, so decoding shows as the
-first two frames' and the waits for a frame not ready yet.
+the rest) and the profile's largest entries by their own time. cProfile sees this thread only,
+timed by its own CPU clock (`time.thread_time`): the frames `FrameCache` reads ahead are decoded
+on another thread, so decoding shows as the first two frames' and the waits for a frame not
+ready yet, and the decoder's CPU time is not counted in whatever this thread ran meanwhile (as
+it was with the process's clock before round 16).
 
 python benchmarks/profile_localize.py [--frames 300] [--top 30]
 """
@@ -63,7 +65,7 @@ def main() -> int:
         with open_frames(sequence) as source:  # warm-up: kernels loaded, files cached
             first = [source.read(index) for index in range(3)]
             list(localize_sequence(first, scene, boxes, params))
-        profile = cProfile.Profile(time.process_time)
+        profile = cProfile.Profile(time.thread_time)
         with open_frames(sequence) as source:
             profile.enable()
             frames = len(list(localize_sequence(source, scene, boxes, params, threads=1)))

@@ -136,14 +136,16 @@ def test_second_process_loads_the_cached_kernels(tmp_path):
 
 
 def test_tracker_import_leaves_out_modules_tracking_does_not_need():
-    """A fresh process importing the tracker does not import dask (through pyFFTW's optional
-    dask interface) or scipy.io, and dask.array.fft still imports afterwards."""
+    """A fresh process importing the tracker and the pipeline does not import dask (through
+    pyFFTW's optional dask interface), scipy.io, or scipy.spatial (rotations load where a
+    quaternion is first converted), and dask.array.fft still imports afterwards."""
     pytest.importorskip("dask.array")
     script = (
         "import sys\n"
         "import autotrack\n"
         "from autotrack import AutoTrack\n"
-        "heavy = [m for m in ('dask', 'scipy.io') if m in sys.modules]\n"
+        "import autotrack.pipeline\n"
+        "heavy = [m for m in ('dask', 'scipy.io', 'scipy.spatial') if m in sys.modules]\n"
         "print(','.join(heavy))\n"
         "import dask.array.fft\n"
         "print(callable(dask.array.fft.fft_wrap))\n"

@@ -3,15 +3,15 @@ and `scipy_binaries.load_compiled` loads a compiled module once, shared with a l
 
 from __future__ import annotations
 
-import subprocess
 import sys
 
 import numpy as np
 import pytest
 import scipy.fft
 
+from autotrack.scipy_binaries import load_compiled
 from autotrack.tracker import pocketfft
-from autotrack.tracker.scipy_binaries import load_compiled
+from tests.processes import printed_by_fresh_python
 
 SIDES = (50, 46, 38, 45)  # the tracker's grid sides: smooth, 2 x 23, 2 x 19, odd
 
@@ -101,6 +101,34 @@ def test_a_later_scipy_fft_import_shares_the_loaded_binding():
         "x = np.random.default_rng(0).random((3, 20, 22)).astype(np.float32)\n"
         "print(scipy.fft.rfft2(x).tobytes() == pocketfft.rfft2(x).tobytes())\n"
     )
-    done = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True)
-    assert done.returncode == 0, done.stderr
-    assert done.stdout.split() == ["False", "True", "True"]
+    assert printed_by_fresh_python(script) == ["False", "True", "True"]
+
+
+def test_two_threads_loading_one_module_load_its_file_once():
+    """The second thread waits for the first one's load and gets the same module (in a fresh
+    process, where scipy.optimize's MINPACK is not loaded yet)."""
+    script = (
+        "import threading\n"
+        "from autotrack import scipy_binaries\n"
+        "original = scipy_binaries._extension_spec\n"
+        "entered, release, lookups, results = threading.Event(), threading.Event(), [], []\n"
+        "def slow_lookup(name):\n"
+        "    lookups.append(name)\n"
+        "    entered.set()\n"
+        "    release.wait(10)\n"
+        "    return original(name)\n"
+        "scipy_binaries._extension_spec = slow_lookup\n"
+        "def load():\n"
+        "    results.append(scipy_binaries.load_compiled('scipy.optimize._minpack'))\n"
+        "first = threading.Thread(target=load)\n"
+        "first.start()\n"
+        "entered.wait(10)\n"
+        "second = threading.Thread(target=load)\n"
+        "second.start()\n"
+        "second.join(0.3)\n"
+        "release.set()\n"
+        "first.join()\n"
+        "second.join()\n"
+        "print(len(lookups), len(results), results[0] is results[1])\n"
+    )
+    assert printed_by_fresh_python(script) == ["1", "2", "True"]

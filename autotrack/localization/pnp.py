@@ -17,6 +17,7 @@ import numpy as np
 from autotrack.errors import InputError
 from autotrack.localization.camera import CameraIntrinsics, camera_pose_from_pnp
 from autotrack.localization.scene import Scene
+from autotrack.scipy_binaries import load_compiled
 
 Box = tuple[float, float, float, float]
 
@@ -89,18 +90,18 @@ def weighted_refinement(
 ) -> np.ndarray:
     """(rvec | tvec) minimising sum_i w_i |project(X_i) - x_i|^2 from `start`: MINPACK's
     Levenberg-Marquardt on OpenCV's analytic Jacobian, what solvePnPRefineLM does for equal
-    weights. scipy.optimize is imported here, on the first frame with a down-weighted
-    landmark, not with the pipeline (~0.1 s of a process's start-up).
+    weights.
 
-    MINPACK's lmder through `scipy.optimize.leastsq` with the settings `least_squares(...,
-    method="lm", xtol=1e-12, ftol=1e-12, x_scale="jac")` gives it (gtol 1e-8, at most 100 n
-    evaluations, step bound factor 100, MINPACK's own column scaling): the same solver on the
-    same numbers, without least_squares' per-call wrapping (~0.2 ms a frame). One projection
-    serves both the residuals and the Jacobian at a point (MINPACK asks for the Jacobian at
-    the point it has just evaluated).
+    MINPACK's lmder with the settings `least_squares(..., method="lm", xtol=1e-12, ftol=1e-12,
+    x_scale="jac")` gives it (gtol 1e-8, at most 100 n evaluations, step bound factor 100,
+    MINPACK's own column scaling), called as `scipy.optimize.leastsq` calls it, on scipy's
+    compiled `_minpack` loaded alone (`scipy_binaries`): the same solver on the same numbers
+    (tests/test_pnp_refine.py compares with leastsq bit for bit), without importing
+    scipy.optimize (~0.45 s, a stall of the first frame with a down-weighted landmark) and
+    without leastsq's argument checks and covariance. One projection serves both the residuals
+    and the Jacobian at a point (MINPACK asks for the Jacobian at the point it has just
+    evaluated).
     """
-    from scipy.optimize import leastsq
-
     scale = np.repeat(np.sqrt(np.asarray(weights, dtype=np.float64)), 2)
     projection = _CachedProjection(camera, object_points)
 
@@ -112,21 +113,16 @@ def weighted_refinement(
         _, jac = projection(params)
         return scale[:, None] * jac
 
-    start = np.asarray(start, dtype=np.float64).reshape(-1)
-    # full_output: no RuntimeWarning when MINPACK stops on its own tolerance limits (its
-    # status 5-8), as least_squares reports none.
-    solution = leastsq(
-        residuals,
-        start,
-        Dfun=jacobian,
-        full_output=True,
-        ftol=1e-12,
-        xtol=1e-12,
-        gtol=1e-8,
-        maxfev=100 * start.size,
-        factor=100.0,
-        diag=None,
-    )[0]
+    start = np.asarray(start, dtype=np.float64).flatten()  # a copy: MINPACK works in place
+    if residuals(start).size < start.size:
+        raise InputError(f"a pose refinement needs at least 3 points, got {len(image_points)}")
+    minpack = load_compiled("scipy.optimize._minpack")
+    # _lmder(func, Dfun, x0, args, full_output, col_deriv, ftol, xtol, gtol, maxfev, factor,
+    # diag) -> (x, info): its status (MINPACK's 1-8) is not needed, as least_squares reports
+    # none either; a stop on the evaluation limit keeps its last point.
+    solution, _ = minpack._lmder(
+        residuals, jacobian, start, (), 0, 0, 1e-12, 1e-12, 1e-8, 100 * start.size, 100.0, None
+    )
     return np.asarray(solution, dtype=np.float64)
 
 

@@ -22,7 +22,6 @@ from collections.abc import Iterable, Iterator, Mapping, Sequence
 from dataclasses import dataclass, field, replace
 
 import numpy as np
-from scipy.spatial.transform import Rotation
 
 from autotrack.errors import InputError
 
@@ -83,6 +82,8 @@ class PoseSample:
         """Camera-to-world rotation matrix (NaN when invalid)."""
         if not self.valid:
             return np.full((3, 3), np.nan)
+        from scipy.spatial.transform import Rotation  # scipy.spatial loads on first use (~0.4 s)
+
         return Rotation.from_quat(self.quaternion_xyzw).as_matrix()
 
 

@@ -9,7 +9,6 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-from scipy.spatial.transform import Rotation
 
 from autotrack.errors import SessionError
 from autotrack.params import TrackerParams
@@ -200,6 +199,8 @@ class Session:
 
     def pose_estimates(self) -> dict[int, PoseEstimate]:
         """Frame index -> the recorded camera pose (rotation from the recorded quaternion)."""
+        from scipy.spatial.transform import Rotation  # scipy.spatial loads on first use (~0.4 s)
+
         track = self.poses
         estimates = {}
         for row, frame_index in enumerate(track.frame_indices.tolist()):

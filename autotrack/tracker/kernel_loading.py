@@ -24,7 +24,7 @@ from numba.core.caching import FunctionCache
 from numba.core.dispatcher import Dispatcher
 from numba.core.runtime import nrt
 
-from autotrack.tracker.scipy_binaries import load_compiled
+from autotrack.scipy_binaries import load_compiled
 
 
 class _CacheWithoutRefresh(FunctionCache):

@@ -15,7 +15,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from autotrack.tracker.scipy_binaries import load_compiled
+from autotrack.scipy_binaries import load_compiled
 
 _binding = load_compiled("scipy.fft._pocketfft.pypocketfft")
 

@@ -1,11 +1,12 @@
 """scipy's compiled modules loaded from their files, without the scipy subpackages around them.
 
-The tracker calls a few compiled routines of scipy: pocketfft's transforms, and (through numba's
-BLAS check) `scipy.linalg.cython_blas`. Importing them the usual way runs the `__init__` of
-their subpackages first: `import scipy.fft` costs 0.27-0.29 s of a fresh process (its Python
-layer, scipy._lib's array-API machinery, and scipy.special for the DCT helpers) and
-`scipy.linalg` another 0.08-0.3 s, most of a second process's time to its first tracked frame.
-The extension files themselves load in a few milliseconds.
+The library calls a few compiled routines of scipy: pocketfft's transforms, MINPACK's
+Levenberg-Marquardt for the weighted pose refinement, and (through numba's BLAS check)
+`scipy.linalg.cython_blas`. Importing them the usual way runs the `__init__` of their
+subpackages first: `import scipy.fft` costs 0.27-0.29 s of a fresh process (its Python layer,
+scipy._lib's array-API machinery, and scipy.special for the DCT helpers), `scipy.linalg`
+another 0.08-0.3 s, and `scipy.optimize` ~0.45 s (a stall of the first frame that refines a
+pose with unequal weights). The extension files themselves load in about a millisecond.
 
 `load_compiled` loads such a module from its file and registers it in `sys.modules` under its
 own name, so a later ordinary import of the subpackage (the app's, a user's) finds it there and
@@ -19,6 +20,7 @@ import importlib
 import importlib.machinery
 import importlib.util
 import sys
+import threading
 from pathlib import Path
 from types import ModuleType
 
@@ -30,17 +32,24 @@ def load_compiled(name: str) -> ModuleType:
     module = sys.modules.get(name)
     if module is not None:
         return module
-    spec = _extension_spec(name)
-    if spec is None:
-        return importlib.import_module(name)
-    module = importlib.util.module_from_spec(spec)
-    sys.modules[name] = module
-    try:
-        spec.loader.exec_module(module)
-    except BaseException:
-        del sys.modules[name]
-        raise
-    return module
+    with _loading:  # two threads asking at once load the file once
+        module = sys.modules.get(name)
+        if module is not None:
+            return module
+        spec = _extension_spec(name)
+        if spec is None:
+            return importlib.import_module(name)
+        module = importlib.util.module_from_spec(spec)
+        sys.modules[name] = module
+        try:
+            spec.loader.exec_module(module)
+        except BaseException:
+            del sys.modules[name]
+            raise
+        return module
+
+
+_loading = threading.Lock()
 
 
 def _extension_spec(name: str) -> importlib.machinery.ModuleSpec | None:
