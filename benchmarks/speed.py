@@ -418,6 +418,11 @@ def main() -> int:
     from autotrack.machine import describe_machine, machine_line
 
     print(f"machine: {machine_line(describe_machine())}")
+    from autotrack.tracker.warmup import warm_up
+
+    # The kernel cache is named by a digest of the package's sources (compile_cache): after any
+    # edit or upgrade the first tracker would compile inside its timed run.
+    print(f"kernels and FFT plans ready before any timing: {warm_up():.1f} s", flush=True)
 
     result = None
     if not args.skip_single:
