@@ -159,73 +159,79 @@ class AdmmSettings:
 def _g_step_kernel(
     xf, yf, h_f, l_f, g_prev, s_xx, s_gx_prev, gamma, theta, num_cells, zero_start, g_out
 ):
-    # Loops run channel-outermost so every array is read contiguously. Complex products are
-    # spelt out on real and imaginary parts in numba's own order (re = ac - bd, im = ad + bc);
-    # a real factor multiplies both parts directly and the division is by a real number, which
-    # gives the same values as the complex arithmetic with a zero imaginary part at half the
-    # work. `zero_start`: h and l are all zero (the first iteration), so their channel sums are
-    # +0 for finite x, the value the skipped loop would produce.
-    channels, rows, cols = xf.shape
+    # Spectra come in as (channels, frequencies) and per-frequency terms as (frequencies,):
+    # flat views of the (rows, half columns) grid, so each loop over a channel is one run of
+    # ~1,300 frequencies the compiler vectorises once, not 50 runs of 26 each re-checking their
+    # arrays for overlap (2.4x faster at 42 x 50 x 26, the same operations). Loops run
+    # channel-outermost so every array is read contiguously. Complex products are spelt out on
+    # real and imaginary parts in numba's own order (re = ac - bd, im = ad + bc); a real factor
+    # multiplies both parts directly and the division is by a real number, which gives the same
+    # values as the complex arithmetic with a zero imaginary part at half the work.
+    # `zero_start`: h and l are all zero (the first iteration), so their channel sums are +0
+    # for finite x, the value the skipped loop would produce.
+    channels, frequencies = xf.shape
     scale = np.float32(1.0 / (gamma + theta))
     t_scale = np.float32(scale / num_cells)
     gamma_scale = np.float32(gamma * scale)
     theta_scale = np.float32(theta * scale)
     cells_penalty = np.float32(num_cells * (gamma + theta))
-    s_hx_re = np.zeros((rows, cols), np.float32)
-    s_hx_im = np.zeros((rows, cols), np.float32)
-    s_lx_re = np.zeros((rows, cols), np.float32)
-    s_lx_im = np.zeros((rows, cols), np.float32)
+    s_hx_re = np.zeros(frequencies, np.float32)
+    s_hx_im = np.zeros(frequencies, np.float32)
+    s_lx_re = np.zeros(frequencies, np.float32)
+    s_lx_im = np.zeros(frequencies, np.float32)
     for k in range(0 if zero_start else channels):
-        for r in range(rows):
-            for c in range(cols):
-                x, h, m = xf[k, r, c], h_f[k, r, c], l_f[k, r, c]
-                # conj(x) h and conj(x) l
-                s_hx_re[r, c] += x.real * h.real + x.imag * h.imag
-                s_hx_im[r, c] += x.real * h.imag - x.imag * h.real
-                s_lx_re[r, c] += x.real * m.real + x.imag * m.imag
-                s_lx_im[r, c] += x.real * m.imag - x.imag * m.real
+        x_k, h_k, l_k = xf[k], h_f[k], l_f[k]
+        for j in range(frequencies):
+            x, h, m = x_k[j], h_k[j], l_k[j]
+            # conj(x) h and conj(x) l
+            s_hx_re[j] += x.real * h.real + x.imag * h.imag
+            s_hx_im[j] += x.real * h.imag - x.imag * h.real
+            s_lx_re[j] += x.real * m.real + x.imag * m.imag
+            s_lx_im[j] += x.real * m.imag - x.imag * m.real
     # x^H rho / ((gamma + theta) B), with B = x^H x + T (gamma + theta)
-    proj_re = np.empty((rows, cols), np.float32)
-    proj_im = np.empty((rows, cols), np.float32)
-    for r in range(rows):
-        for c in range(cols):
-            label_gain = t_scale * s_xx[r, c]
-            y, gx = yf[r, c], s_gx_prev[r, c]
-            denominator = s_xx[r, c] + cells_penalty
-            proj_re[r, c] = (
-                label_gain * y.real
-                + theta_scale * gx.real
-                - scale * s_lx_re[r, c]
-                + gamma_scale * s_hx_re[r, c]
-            ) / denominator
-            proj_im[r, c] = (
-                label_gain * y.imag
-                + theta_scale * gx.imag
-                - scale * s_lx_im[r, c]
-                + gamma_scale * s_hx_im[r, c]
-            ) / denominator
+    proj_re = np.empty(frequencies, np.float32)
+    proj_im = np.empty(frequencies, np.float32)
+    label_re = np.empty(frequencies, np.float32)  # y / ((gamma + theta) T)
+    label_im = np.empty(frequencies, np.float32)
+    for j in range(frequencies):
+        label_gain = t_scale * s_xx[j]
+        y, gx = yf[j], s_gx_prev[j]
+        denominator = s_xx[j] + cells_penalty
+        proj_re[j] = (
+            label_gain * y.real
+            + theta_scale * gx.real
+            - scale * s_lx_re[j]
+            + gamma_scale * s_hx_re[j]
+        ) / denominator
+        proj_im[j] = (
+            label_gain * y.imag
+            + theta_scale * gx.imag
+            - scale * s_lx_im[j]
+            + gamma_scale * s_hx_im[j]
+        ) / denominator
+        label_re[j] = t_scale * y.real
+        label_im[j] = t_scale * y.imag
     for k in range(channels):
-        for r in range(rows):
-            for c in range(cols):
-                x, m, h, p = xf[k, r, c], l_f[k, r, c], h_f[k, r, c], g_prev[k, r, c]
-                y_re = t_scale * yf[r, c].real
-                y_im = t_scale * yf[r, c].imag
-                pr, pi = proj_re[r, c], proj_im[r, c]
-                g_re = (
-                    (y_re * x.real - y_im * x.imag)
-                    - scale * m.real
-                    + gamma_scale * h.real
-                    + theta_scale * p.real
-                    - (x.real * pr - x.imag * pi)
-                )
-                g_im = (
-                    (y_re * x.imag + y_im * x.real)
-                    - scale * m.imag
-                    + gamma_scale * h.imag
-                    + theta_scale * p.imag
-                    - (x.real * pi + x.imag * pr)
-                )
-                g_out[k, r, c] = complex(g_re, g_im)
+        x_k, l_k, h_k, p_k, out_k = xf[k], l_f[k], h_f[k], g_prev[k], g_out[k]
+        for j in range(frequencies):
+            x, m, h, p = x_k[j], l_k[j], h_k[j], p_k[j]
+            y_re, y_im = label_re[j], label_im[j]
+            pr, pi = proj_re[j], proj_im[j]
+            g_re = (
+                (y_re * x.real - y_im * x.imag)
+                - scale * m.real
+                + gamma_scale * h.real
+                + theta_scale * p.real
+                - (x.real * pr - x.imag * pi)
+            )
+            g_im = (
+                (y_re * x.imag + y_im * x.real)
+                - scale * m.imag
+                + gamma_scale * h.imag
+                + theta_scale * p.imag
+                - (x.real * pi + x.imag * pr)
+            )
+            out_k[j] = complex(g_re, g_im)
 
 
 def solve_g_step(
@@ -249,22 +255,28 @@ def solve_g_step(
     frame and passed in precomputed. `zero_start` says h and l are all zero (ADMM's first
     iteration): their sums over channels are then not computed.
     """
-    g_f = np.empty_like(xf)
+    g_f = np.empty(xf.shape, xf.dtype)  # C-contiguous, so `_by_channel` is a view of it
     _g_step_kernel(
-        xf,
-        yf,
-        h_f,
-        l_f,
-        g_prev,
-        s_xx,
-        s_gx_prev,
+        _by_channel(xf),
+        yf.reshape(-1),
+        _by_channel(h_f),
+        _by_channel(l_f),
+        _by_channel(g_prev),
+        s_xx.reshape(-1),
+        s_gx_prev.reshape(-1),
         float(gamma),
         float(theta),
         num_cells,
         bool(zero_start),
-        g_f,
+        _by_channel(g_f),
     )
     return g_f
+
+
+def _by_channel(spectra: np.ndarray) -> np.ndarray:
+    """(channels, rows, cols) as (channels, rows * cols): a view of a C-contiguous array (a
+    copy of any other, which only inputs may be)."""
+    return spectra.reshape(spectra.shape[0], -1)
 
 
 def solve_h_step(
