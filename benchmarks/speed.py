@@ -386,7 +386,7 @@ def variant_params(overrides: str) -> TrackerParams | None:
         return None
 
 
-def main() -> int:
+def parse_arguments() -> argparse.Namespace:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--trackers", default="autotrack,csrt", help="interleaved, one thread")
     parser.add_argument("--repeats", type=int, default=3, help="runs per tracker and sequence")
@@ -407,7 +407,11 @@ def main() -> int:
     parser.add_argument(
         "--startup-runs", type=int, default=1, help="first + second processes, each on new caches"
     )
-    args = parser.parse_args()
+    return parser.parse_args()
+
+
+def main() -> int:
+    args = parse_arguments()
     if not SHARED.is_dir():
         print(f"needs {SHARED}", file=sys.stderr)
         return 2
