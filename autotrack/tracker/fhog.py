@@ -159,16 +159,73 @@ def _row_gradients(plane, y, gx, gy):
 
 
 @njit(cache=True, nogil=True, fastmath=False, error_model="numpy")
+def _strongest_gradients(planes, rows, cols):
+    """gradMag's choice of channel: per pixel of the first `rows` x `cols`, the x and y
+    gradients of the channel with the largest squared magnitude (a later channel only if
+    strictly larger) and that magnitude, as three float32 (rows, cols) arrays.
+
+    Three channels (RGB, the usual case) choose in registers and store every element once. The
+    general loop keeps a running best and updates it in place; LLVM reads `gx[x] = cx if
+    larger else gx[x]` as a store only where `larger` holds and vectorises it with masked
+    stores (vmaskmovps), which AMD's Zen cores run at a fraction of a plain store's rate (1.5x
+    slower on RGB search patches). The comparisons and products are the same in both. The
+    whole image in one call: a call a row cost more than the work on the scale filter's small
+    samples. A grey image has no choice to make and is not passed (`rows` = 0).
+    """
+    channels = planes.shape[0]
+    gradients = np.empty((3, rows, cols), np.float32)
+    gx, gy, squared = gradients[0], gradients[1], gradients[2]
+    scratch = np.empty((6, cols), np.float32)  # one row's x and y gradients of each channel
+    gx0, gy0, gx1, gy1 = scratch[0], scratch[1], scratch[2], scratch[3]
+    gx2, gy2 = scratch[4], scratch[5]
+    for y in range(rows):
+        row_gx, row_gy, row_squared = gx[y], gy[y], squared[y]
+        if channels == 3:
+            _row_gradients(planes[0], y, gx0, gy0)
+            _row_gradients(planes[1], y, gx1, gy1)
+            _row_gradients(planes[2], y, gx2, gy2)
+            for x in range(cols):
+                best_x, best_y = gx0[x], gy0[x]
+                best = best_x * best_x + best_y * best_y
+                cx, cy = gx1[x], gy1[x]
+                candidate = cx * cx + cy * cy
+                larger = candidate > best
+                best = candidate if larger else best
+                best_x = cx if larger else best_x
+                best_y = cy if larger else best_y
+                cx, cy = gx2[x], gy2[x]
+                candidate = cx * cx + cy * cy
+                larger = candidate > best
+                row_squared[x] = candidate if larger else best
+                row_gx[x] = cx if larger else best_x
+                row_gy[x] = cy if larger else best_y
+            continue
+        _row_gradients(planes[0], y, row_gx, row_gy)
+        for x in range(cols):
+            row_squared[x] = row_gx[x] * row_gx[x] + row_gy[x] * row_gy[x]
+        for c in range(1, channels):
+            _row_gradients(planes[c], y, gx0, gy0)
+            for x in range(cols):
+                cx, cy, best = gx0[x], gy0[x], row_squared[x]
+                candidate = cx * cx + cy * cy
+                larger = candidate > best
+                row_squared[x] = candidate if larger else best
+                row_gx[x] = cx if larger else row_gx[x]
+                row_gy[x] = cy if larger else row_gy[x]
+    return gx, gy, squared
+
+
+@njit(cache=True, nogil=True, fastmath=False, error_model="numpy")
 def _gradient_histogram(planes, cell, n_bins, bins, hist):
     """gradMag (full orientation) + gradHist(softBin=-1): bilinear in space, hard in angle.
 
     `planes` is float32 (C, H, W), `bins` `orientation_bins(n_bins // 2)`, `hist` C-contiguous
     (>= n_bins, hb, wb), channel-major: a pixel's right cell is the next float, not n_bins on.
-    Row by row in small vectorisable passes, branch-free where the data decide (random gradient
+    The colour channel is chosen for the whole image first (`_strongest_gradients`), then row by
+    row in small vectorisable passes, branch-free where the data decide (random gradient
     signs would defeat branch prediction); the scatter indexes the flat histogram with unsigned
     indices (no negative-index wraparound code per access).
     """
-    channels = planes.shape[0]
     hb, wb = hist.shape[1], hist.shape[2]
     rows, cols = hb * cell, wb * cell
     inv_cell2 = _ONE / np.float32(cell) / np.float32(cell)
@@ -176,29 +233,25 @@ def _gradient_histogram(planes, cell, n_bins, bins, hist):
     zero = np.float32(0.0)
     x_first, x_frac = _bin_coordinates(cols, cell)
     y_first, y_frac = _bin_coordinates(rows, cell)
-    gx = np.empty(cols, np.float32)
-    gy = np.empty(cols, np.float32)
-    squared = np.empty(cols, np.float32)
-    channel_gx = np.empty(cols, np.float32)
-    channel_gy = np.empty(cols, np.float32)
+    channels = planes.shape[0]
+    row_gradients = np.empty((3, cols), np.float32)  # a grey row's gx, gy and squared
+    row_gx, row_gy, row_squared = row_gradients[0], row_gradients[1], row_gradients[2]
+    image_gx, image_gy, image_squared = _strongest_gradients(
+        planes, rows if channels > 1 else 0, cols
+    )
     table_index = np.empty(cols, np.uint32)
     weight = np.empty(cols, np.float32)
     orient = np.empty(cols, np.int64)
     flat = hist.reshape(-1)
     plane = hb * wb
     for y in range(rows):
-        _row_gradients(planes[0], y, gx, gy)
-        for x in range(cols):
-            squared[x] = gx[x] * gx[x] + gy[x] * gy[x]
-        for c in range(1, channels):  # keep the channel of largest magnitude (strictly larger)
-            _row_gradients(planes[c], y, channel_gx, channel_gy)
-            for x in range(cols):  # unconditional stores of selects: this form vectorises
-                cx, cy, best = channel_gx[x], channel_gy[x], squared[x]
-                candidate = cx * cx + cy * cy
-                larger = candidate > best
-                squared[x] = candidate if larger else best
-                gx[x] = cx if larger else gx[x]
-                gy[x] = cy if larger else gy[x]
+        if channels == 1:  # no choice to make: the row's gradients, kept in cache
+            gx, gy, squared = row_gx, row_gy, row_squared
+            _row_gradients(planes[0], y, gx, gy)
+            for x in range(cols):
+                squared[x] = gx[x] * gx[x] + gy[x] * gy[x]
+        else:
+            gx, gy, squared = image_gx[y], image_gy[y], image_squared[y]
         for x in range(cols):
             magnitude = np.float32(math.sqrt(squared[x]))
             inverse = min(_ONE / magnitude, _ZERO_GRADIENT_INVERSE)
