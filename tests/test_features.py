@@ -134,7 +134,7 @@ def reference_fhog(image: np.ndarray, cell: int = 4, n_orients: int = 9, clip: f
 # -- fhog -------------------------------------------------------------------------------------
 
 
-@pytest.mark.parametrize("channels", [None, 3])
+@pytest.mark.parametrize("channels", [None, 2, 3, 4])  # grey, RGB and the general choice
 def test_fhog_matches_the_written_reference_on_random_images(channels):
     rng = np.random.default_rng(7 if channels else 11)
     for _ in range(3):

@@ -84,7 +84,8 @@ def update_multiplier(
     run-time overlap check sends the loop to its scalar version (4x slower at 42 x 50 x 26);
     reading and writing through one array needs no check."""
     if out is l_f:
-        _update_multiplier_in_place(_parts(l_f), _parts(g_f), _parts(h_f), gamma)
+        flat = [_parts(spectrum).reshape(-1) for spectrum in (l_f, g_f, h_f)]
+        _update_multiplier_in_place(*flat, gamma)
     else:
         _update_multiplier_kernel(_parts(l_f), _parts(g_f), _parts(h_f), gamma, _parts(out))
 
@@ -99,12 +100,9 @@ def _update_multiplier_kernel(l_parts, g_parts, h_parts, gamma, out):
 
 
 @njit(cache=True, nogil=True, fastmath=False)
-def _update_multiplier_in_place(l_parts, g_parts, h_parts, gamma):
-    channels, rows, parts = l_parts.shape
-    for k in range(channels):
-        for r in range(rows):
-            for p in range(parts):
-                l_parts[k, r, p] = l_parts[k, r, p] + gamma * (g_parts[k, r, p] - h_parts[k, r, p])
+def _update_multiplier_in_place(l_values, g_values, h_values, gamma):
+    for i in range(l_values.size):  # flat float32 views of the spectra
+        l_values[i] = l_values[i] + gamma * (g_values[i] - h_values[i])
 
 
 def _parts(spectrum: np.ndarray) -> np.ndarray:

@@ -30,6 +30,7 @@ import numpy as np
 from numba import njit
 
 from autotrack.errors import InputError
+from autotrack.tracker.gradients import planar_float32, row_gradients, strongest_gradients
 
 FHOG_TRUNCATION_CHANNELS = 1
 """The toolbox appends one all-zero truncation channel; trackers drop it."""
@@ -112,116 +113,12 @@ def _bin_coordinates(n_pixels, cell):
 
 
 @njit(cache=True, nogil=True, fastmath=False, error_model="numpy")
-def _planar_float32(image):
-    """(H, W, C) of any real dtype -> C-contiguous float32 (C, H, W), as `single(I)` does."""
-    height, width, channels = image.shape
-    planes = np.empty((channels, height, width), np.float32)
-    if channels == 3:  # the common RGB case, written so that LLVM vectorises the deinterleave
-        flat = image.reshape(height, width * 3)
-        for y in range(height):
-            row = flat[y]
-            red, green, blue = planes[0, y], planes[1, y], planes[2, y]
-            for x in range(width):
-                red[x] = np.float32(row[3 * x])
-                green[x] = np.float32(row[3 * x + 1])
-                blue[x] = np.float32(row[3 * x + 2])
-    else:
-        for y in range(height):
-            for c in range(channels):
-                source = image[y, :, c]
-                target = planes[c, y]
-                for x in range(width):
-                    target[x] = np.float32(source[x])
-    return planes
-
-
-@njit(cache=True, nogil=True, fastmath=False, error_model="numpy", inline="always")
-def _row_gradients(plane, y, gx, gy):
-    """gradient2 on one row: centred differences, one-sided with factor 1 at the image border.
-
-    Written with offset views so every loop index is a plain range index (vectorisable).
-    """
-    height, width = plane.shape
-    cols = gx.size
-    up = y - 1 if y > 0 else 0
-    down = y + 1 if y < height - 1 else height - 1
-    y_scale = _HALF if (y > 0 and y < height - 1) else _ONE
-    above, below, row = plane[up], plane[down], plane[y]
-    for x in range(cols):
-        gy[x] = (below[x] - above[x]) * y_scale
-    inner = min(cols, width - 1) - 1  # columns 1..inner have both neighbours
-    ahead, behind, centre = row[2 : 2 + inner], row[:inner], gx[1 : 1 + inner]
-    for i in range(inner):
-        centre[i] = (ahead[i] - behind[i]) * _HALF
-    gx[0] = row[1] - row[0]
-    if cols == width:
-        gx[cols - 1] = row[width - 1] - row[width - 2]
-
-
-@njit(cache=True, nogil=True, fastmath=False, error_model="numpy")
-def _strongest_gradients(planes, rows, cols):
-    """gradMag's choice of channel: per pixel of the first `rows` x `cols`, the x and y
-    gradients of the channel with the largest squared magnitude (a later channel only if
-    strictly larger) and that magnitude, as three float32 (rows, cols) arrays.
-
-    Three channels (RGB, the usual case) choose in registers and store every element once. The
-    general loop keeps a running best and updates it in place; LLVM reads `gx[x] = cx if
-    larger else gx[x]` as a store only where `larger` holds and vectorises it with masked
-    stores (vmaskmovps), which AMD's Zen cores run at a fraction of a plain store's rate (1.5x
-    slower on RGB search patches). The comparisons and products are the same in both. The
-    whole image in one call: a call a row cost more than the work on the scale filter's small
-    samples. A grey image has no choice to make and is not passed (`rows` = 0).
-    """
-    channels = planes.shape[0]
-    gradients = np.empty((3, rows, cols), np.float32)
-    gx, gy, squared = gradients[0], gradients[1], gradients[2]
-    scratch = np.empty((6, cols), np.float32)  # one row's x and y gradients of each channel
-    gx0, gy0, gx1, gy1 = scratch[0], scratch[1], scratch[2], scratch[3]
-    gx2, gy2 = scratch[4], scratch[5]
-    for y in range(rows):
-        row_gx, row_gy, row_squared = gx[y], gy[y], squared[y]
-        if channels == 3:
-            _row_gradients(planes[0], y, gx0, gy0)
-            _row_gradients(planes[1], y, gx1, gy1)
-            _row_gradients(planes[2], y, gx2, gy2)
-            for x in range(cols):
-                best_x, best_y = gx0[x], gy0[x]
-                best = best_x * best_x + best_y * best_y
-                cx, cy = gx1[x], gy1[x]
-                candidate = cx * cx + cy * cy
-                larger = candidate > best
-                best = candidate if larger else best
-                best_x = cx if larger else best_x
-                best_y = cy if larger else best_y
-                cx, cy = gx2[x], gy2[x]
-                candidate = cx * cx + cy * cy
-                larger = candidate > best
-                row_squared[x] = candidate if larger else best
-                row_gx[x] = cx if larger else best_x
-                row_gy[x] = cy if larger else best_y
-            continue
-        _row_gradients(planes[0], y, row_gx, row_gy)
-        for x in range(cols):
-            row_squared[x] = row_gx[x] * row_gx[x] + row_gy[x] * row_gy[x]
-        for c in range(1, channels):
-            _row_gradients(planes[c], y, gx0, gy0)
-            for x in range(cols):
-                cx, cy, best = gx0[x], gy0[x], row_squared[x]
-                candidate = cx * cx + cy * cy
-                larger = candidate > best
-                row_squared[x] = candidate if larger else best
-                row_gx[x] = cx if larger else row_gx[x]
-                row_gy[x] = cy if larger else row_gy[x]
-    return gx, gy, squared
-
-
-@njit(cache=True, nogil=True, fastmath=False, error_model="numpy")
 def _gradient_histogram(planes, cell, n_bins, bins, hist):
     """gradMag (full orientation) + gradHist(softBin=-1): bilinear in space, hard in angle.
 
     `planes` is float32 (C, H, W), `bins` `orientation_bins(n_bins // 2)`, `hist` C-contiguous
     (>= n_bins, hb, wb), channel-major: a pixel's right cell is the next float, not n_bins on.
-    The colour channel is chosen for the whole image first (`_strongest_gradients`), then row by
+    The colour channel is chosen for the whole image first (`strongest_gradients`), then row by
     row in small vectorisable passes, branch-free where the data decide (random gradient
     signs would defeat branch prediction); the scatter indexes the flat histogram with unsigned
     indices (no negative-index wraparound code per access).
@@ -234,9 +131,9 @@ def _gradient_histogram(planes, cell, n_bins, bins, hist):
     x_first, x_frac = _bin_coordinates(cols, cell)
     y_first, y_frac = _bin_coordinates(rows, cell)
     channels = planes.shape[0]
-    row_gradients = np.empty((3, cols), np.float32)  # a grey row's gx, gy and squared
-    row_gx, row_gy, row_squared = row_gradients[0], row_gradients[1], row_gradients[2]
-    image_gx, image_gy, image_squared = _strongest_gradients(
+    grey_row = np.empty((3, cols), np.float32)  # a grey row's gx, gy and squared
+    row_gx, row_gy, row_squared = grey_row[0], grey_row[1], grey_row[2]
+    image_gx, image_gy, image_squared = strongest_gradients(
         planes, rows if channels > 1 else 0, cols
     )
     table_index = np.empty(cols, np.uint32)
@@ -247,7 +144,7 @@ def _gradient_histogram(planes, cell, n_bins, bins, hist):
     for y in range(rows):
         if channels == 1:  # no choice to make: the row's gradients, kept in cache
             gx, gy, squared = row_gx, row_gy, row_squared
-            _row_gradients(planes[0], y, gx, gy)
+            row_gradients(planes[0], y, gx, gy)
             for x in range(cols):
                 squared[x] = gx[x] * gx[x] + gy[x] * gy[x]
         else:
@@ -391,7 +288,7 @@ def _fhog_into(image, cell, n_orients, clip, bins, weights, out):
     n_bins = 2 * n_orients
     # The 2n sensitive bins then the n insensitive ones, channel-major (one plane per bin).
     bins_by_channel = np.zeros((n_bins + n_orients, hb, wb), np.float32)
-    _gradient_histogram(_planar_float32(image), cell, n_bins, bins, bins_by_channel)
+    _gradient_histogram(planar_float32(image), cell, n_bins, bins, bins_by_channel)
     for o in range(n_orients):
         for y in range(hb):
             for x in range(wb):
