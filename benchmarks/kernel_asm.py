@@ -23,9 +23,7 @@ Only kernels with masked stores or gathers are listed unless `--all` is given.
 from __future__ import annotations
 
 import argparse
-import importlib
 import os
-import pkgutil
 import re
 import sys
 import tempfile
@@ -40,21 +38,8 @@ PATTERNS = {
 }
 
 
-def kernel_dispatchers() -> list[tuple[str, object]]:
-    """(module.name, dispatcher) of every numba kernel defined in the package's modules."""
-    from numba.core.registry import CPUDispatcher
-
-    import autotrack
-
-    found: dict[int, tuple[str, object]] = {}
-    for module_info in pkgutil.walk_packages(autotrack.__path__, "autotrack."):
-        if module_info.name.endswith("__main__") or module_info.name.startswith("autotrack.app"):
-            continue
-        module = importlib.import_module(module_info.name)
-        for name, value in vars(module).items():
-            if isinstance(value, CPUDispatcher) and value.__module__ == module.__name__:
-                found.setdefault(id(value), (f"{module.__name__}.{name}", value))
-    return sorted(found.values(), key=lambda entry: entry[0])
+def _name(kernel) -> str:
+    return f"{kernel.py_func.__module__}.{kernel.py_func.__qualname__}"
 
 
 def main() -> int:
@@ -63,22 +48,23 @@ def main() -> int:
     args = parser.parse_args()
     with tempfile.TemporaryDirectory() as cache:
         os.environ["NUMBA_CACHE_DIR"] = cache  # before numba is imported: compile afresh
-        from autotrack.tracker.warmup import warm_up
+        from autotrack.tracker.kernel_loading import package_kernels
+        from autotrack.tracker.warmup import warm_up  # imports every module with kernels
 
         print(f"compiled by tracking the warm-up target: {warm_up():.1f} s")
         flagged = 0
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")  # numba warns for kernels it has no assembly of
-            kernels = kernel_dispatchers()
-            for name, dispatcher in kernels:
-                for signature, assembly in dispatcher.inspect_asm().items():
+            kernels = sorted(package_kernels(), key=_name)
+            for kernel in kernels:
+                for signature, assembly in kernel.inspect_asm().items():
                     counts = {key: len(p.findall(assembly)) for key, p in PATTERNS.items()}
                     suspect = counts["masked stores"] or counts["gather"]
                     flagged += bool(suspect)
                     if suspect or args.all:
                         described = ", ".join(f"{key} {count}" for key, count in counts.items())
                         arguments = ", ".join(str(t) for t in signature)[:100]
-                        print(f"{name}({arguments}): {described}")
+                        print(f"{_name(kernel)}({arguments}): {described}")
         print(f"{len(kernels)} kernels, {flagged} signatures with masked stores or gathers")
     return 0
 

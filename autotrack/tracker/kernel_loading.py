@@ -44,6 +44,22 @@ def _supported() -> bool:
     ) and callable(getattr(nrt.rtsys, "initialize", None))
 
 
+def kernels_of(*modules: ModuleType) -> list[Dispatcher]:
+    """The numba kernels (`@njit` dispatchers) at the top level of `modules`, each once (a kernel
+    one module imports from another is listed once)."""
+    kernels: dict[int, Dispatcher] = {}
+    for module in modules:
+        for value in vars(module).values():
+            if isinstance(value, Dispatcher):
+                kernels.setdefault(id(value), value)
+    return list(kernels.values())
+
+
+def package_kernels(package: str = "autotrack") -> list[Dispatcher]:
+    """`kernels_of` every module of `package` imported so far."""
+    return kernels_of(*_imported_modules(package))
+
+
 def load_without_refresh(*modules: ModuleType) -> int:
     """Make the cached `@njit(cache=True)` kernels defined at the top level of `modules` load
     without numba's target refresh; returns how many kernels now do."""
@@ -51,16 +67,18 @@ def load_without_refresh(*modules: ModuleType) -> int:
         return 0
     load_compiled("scipy.linalg.cython_blas")  # what numba's BLAS check imports
     count = 0
-    for module in modules:
-        for value in vars(module).values():
-            if isinstance(value, Dispatcher) and type(value._cache) is FunctionCache:
-                value._cache.__class__ = _CacheWithoutRefresh
-                count += 1
+    for kernel in kernels_of(*modules):
+        if type(kernel._cache) is FunctionCache:
+            kernel._cache.__class__ = _CacheWithoutRefresh
+            count += 1
     return count
 
 
 def load_package_without_refresh(package: str = "autotrack") -> int:
     """`load_without_refresh` for every module of `package` imported so far."""
+    return load_without_refresh(*_imported_modules(package))
+
+
+def _imported_modules(package: str) -> list[ModuleType]:
     prefix = package + "."
-    modules = [m for name, m in list(sys.modules.items()) if name.startswith(prefix) and m]
-    return load_without_refresh(*modules)
+    return [m for name, m in list(sys.modules.items()) if name.startswith(prefix) and m]
