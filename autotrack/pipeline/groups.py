@@ -123,8 +123,8 @@ class TrackerGroups:
         `previous_index`, usually `frame_index - 1`) onto `frame_index`.
 
         `frame_of(index)` gives the frame (read only when a group is due). `horizon`: the
-        caller advances frame by frame up to it next; the groups' child processes then start
-        on the next frame as soon as this process's targets are tracked (`following_frame`,
+        caller advances frame by frame up to it next; the groups' child processes then go on
+        to the next frame as soon as they have tracked this one (`following_frame`,
         `MultiTracker.update`'s `next_frame`; a frame that cannot be read then is not
         speculated on, its error comes when it is tracked). Returns the results and the
         tracking time in seconds (NaN when no group was due).

@@ -9,10 +9,11 @@ serialise on the GIL). Every result carries the multi-tracker's frame index, so 
 or reset later is numbered like the others.
 
 Speculation: a caller that knows the frame the next `update` will get passes it along
-(`update(frame, next_frame)`, called once this process's targets are tracked; or `speculate`
-between two calls). The children start tracking it at once, while this process collects their
-answers, stores results, solves the pose and reads the next frame, and the next `update` with
-that frame (the same array, or equal values) collects their answers without sending anything.
+(`update(frame, next_frame)`, called before this process's targets are tracked; or `speculate`
+between two calls). The children queue it behind the frame they are tracking, so they never
+wait for this process while it tracks its own targets, collects their answers, stores results,
+solves the pose and reads the next frame; the next `update` with that frame (the same array,
+or equal values) collects their answers without sending anything.
 Each child copies the trackers it updates speculatively first (`target_process`); any other
 call before that update (another frame, init, a target added, reset or removed, close) first
 has them put back and drops the speculative answers, errors included, so every call pattern
@@ -122,9 +123,9 @@ class MultiTracker:
         self, frame: np.ndarray, next_frame: Callable[[], np.ndarray] | None = None
     ) -> dict[str, TrackResult]:
         """Track every target into the next frame. `next_frame` gives the frame the update
-        after this one will be given: it is called once this process's targets are tracked,
-        and the children start on that frame (`speculate`) before this frame's answers are
-        collected (an error in it, or an invalid frame: no speculation)."""
+        after this one will be given: it is called before this process's targets are tracked,
+        and the children go on to that frame (`speculate`) as soon as they have tracked this
+        one (an error in it, or an invalid frame: no speculation)."""
         if self._speculation is not None and self._speculation.matches(frame):
             # The children have been tracking this frame since `speculate`.
             self._speculation = None
@@ -299,18 +300,20 @@ class MultiTracker:
         step: Callable[[str, AutoTrack], TrackResult],
         next_frame: Callable[[], np.ndarray] | None = None,
     ) -> dict[str, TrackResult]:
-        """Apply `step` to every (target id, tracker) of this process, concurrently when there
-        is a pool, speculate on `next_frame()` when given, then collect the children's answers
-        to the command sent to them before (the speculation's are left for the next update)."""
+        """Speculate on `next_frame()` when given (first: the children queue it behind this
+        frame, and never wait while this process tracks), apply `step` to every (target id,
+        tracker) of this process, concurrently when there is a pool, then collect the
+        children's answers to the command sent to them before (the speculation's are left for
+        the next update)."""
         items = list(self._trackers.items())
         try:
+            if next_frame is not None:
+                self._speculate_on(next_frame)
             if self._pool is None or len(items) < 2:
                 results = {k: step(k, tracker) for k, tracker in items}
             else:
                 futures = {k: self._pool.submit(step, k, tracker) for k, tracker in items}
                 results = {k: future.result() for k, future in futures.items()}
-            if next_frame is not None:
-                self._speculate_on(next_frame)
         finally:
             results_of_children = self._collect_children()
         results.update(results_of_children)
