@@ -244,6 +244,31 @@ def test_frame_cache_reads_the_next_image_ahead_in_order(tmp_path):
     assert source.readers[0] == main  # the jump back: no longer cached, read here
 
 
+def test_frame_cache_reads_several_frames_ahead_and_drops_them_on_a_jump(tmp_path):
+    written = _write_frames(tmp_path / "seq", 12)
+    source = _ThreadRecordingSequence(sorted((tmp_path / "seq").glob("*.png")), "seq")
+    depth = frames.READ_AHEAD_FRAMES
+    assert depth >= 2
+    with contextlib.closing(FrameCache(source, size=2)) as cache:
+        cache.read(0)
+        cache.read(1)
+        for future in list(cache._pending.values()):
+            future.result()
+        # Frames 2 .. 1 + depth read ahead on the read-ahead thread, none beyond.
+        assert sorted(source.readers) == list(range(2 + depth))
+        assert all(source.readers[k].startswith("prefetch") for k in range(2, 2 + depth))
+        np.testing.assert_array_equal(cache.read(2), cv2.cvtColor(written[2], cv2.COLOR_BGR2RGB))
+        for future in list(cache._pending.values()):
+            future.result()
+        assert source.readers[2 + depth].startswith("prefetch")  # the next one is queued
+        jump = 4 + depth
+        np.testing.assert_array_equal(
+            cache.read(jump), cv2.cvtColor(written[jump], cv2.COLOR_BGR2RGB)
+        )
+        assert source.readers[jump] == threading.current_thread().name
+        assert not cache._pending  # the frames read ahead before the jump are dropped
+
+
 class _PriorityRecordingSequence(ImageSequence):
     """An image sequence that notes the scheduling niceness of the thread reading each frame."""
 

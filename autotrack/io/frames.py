@@ -324,14 +324,16 @@ class FrameCache:
     decoding again.
 
     Reading frames in order from a source whose reads are independent (image files) reads the
-    next frame on a background thread meanwhile (`prefetch`; OpenCV releases the GIL while it
-    decodes and converts, so the frame is ready when the trackers of the frame before are
-    done): the caller gets the same frames in the same order, and a frame that cannot be read
-    raises the source's own error when the caller asks for it, as without prefetching. One
-    thread ("prefetch") serves every read-ahead of the cache, started on the first and stopped
-    by `close` (or when the cache is garbage-collected); a thread per frame cost the caller
-    ~0.1 ms a frame to start. It runs at a low priority (`READ_AHEAD_NICENESS`): with tracking
-    processes on every core it decodes in their idle time instead of slowing them down.
+    next `READ_AHEAD_FRAMES` frames on a background thread meanwhile (`prefetch`; the decoders
+    release the GIL, so a frame is ready when the trackers of the frame before are done): the
+    caller gets the same frames in the same order, and a frame that cannot be read raises the
+    source's own error when the caller asks for it, as without prefetching; a jump drops the
+    frames read ahead. One thread ("prefetch") serves every read-ahead of the cache, started on
+    the first and stopped by `close` (or when the cache is garbage-collected); a thread per
+    frame cost the caller ~0.1 ms a frame to start. It runs at a low priority
+    (`READ_AHEAD_NICENESS`): with tracking processes on every core it decodes in their idle
+    time instead of slowing them down, and several frames ahead it can use idle time wherever
+    it falls, not only in the one frame's time before that frame is needed.
     """
 
     def __init__(self, frames: FrameSource, size: int, *, prefetch: bool = True) -> None:
@@ -340,7 +342,7 @@ class FrameCache:
         self.prefetch = prefetch and frames.independent_reads
         self._cached: OrderedDict[int, np.ndarray] = OrderedDict()
         self._reader: ThreadPoolExecutor | None = None
-        self._pending: tuple[int, Future[np.ndarray]] | None = None
+        self._pending: dict[int, Future[np.ndarray]] = {}
         self._last_read = -2
 
     def read(self, index: int) -> np.ndarray:
@@ -360,25 +362,29 @@ class FrameCache:
         self._cached[index] = image
         if len(self._cached) > self.size:
             self._cached.popitem(last=False)
-        following = index + 1
-        if self.prefetch and index == self._last_read + 1 and following < len(self.frames):
+        if self.prefetch and index == self._last_read + 1:
             if self._reader is None:
                 self._reader = ThreadPoolExecutor(
                     max_workers=1, thread_name_prefix="prefetch", initializer=_yield_to_trackers
                 )
-            self._pending = (following, self._reader.submit(self.frames.read, following))
+            last = min(index + READ_AHEAD_FRAMES, len(self.frames) - 1)
+            for following in range(index + 1, last + 1):
+                if following not in self._pending and following not in self._cached:
+                    self._pending[following] = self._reader.submit(self.frames.read, following)
         self._last_read = index
         return image
 
     def _prefetched(self, index: int) -> np.ndarray | None:
-        """The frame read ahead when it is `index`, else None (a jump, or the read failed: the
-        caller reads it again and gets the source's own error)."""
-        pending, self._pending = self._pending, None
-        if pending is None:
-            return None
-        ahead, future = pending
-        if ahead != index:
-            return None  # a jump: that frame is not needed next after all
+        """The frame read ahead when it is `index`, else None (not read ahead, or the read
+        failed: the caller reads it again and gets the source's own error). A jump drops the
+        other frames read ahead."""
+        future = self._pending.pop(index, None)
+        if future is None or index != self._last_read + 1:
+            for stale in self._pending.values():
+                stale.cancel()
+            self._pending.clear()  # a jump: the frames read ahead are not needed next after all
+            if future is None:
+                return None
         try:
             return future.result()
         except Exception:  # noqa: BLE001 - read again by the caller, which reports the error
@@ -387,11 +393,18 @@ class FrameCache:
     def close(self) -> None:
         """Stop the read-ahead thread (after the read in progress); reads go on without it."""
         self.prefetch = False
-        self._pending = None
+        for future in self._pending.values():
+            future.cancel()
+        self._pending = {}
         if self._reader is not None:
             self._reader.shutdown(wait=True)
             self._reader = None
 
+
+READ_AHEAD_FRAMES = 3
+"""Frames a `FrameCache` decodes ahead of the caller: with two tracking processes on two cores,
+three let the decoding fill idle time that one frame ahead leaves unused (72.2 against 69.7
+frames/s, docs/benchmarks.md, round 19); six gave no more."""
 
 READ_AHEAD_NICENESS = 19
 """Scheduling niceness of the read-ahead thread (Linux: per thread): it decodes on a core the
