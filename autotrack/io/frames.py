@@ -121,7 +121,7 @@ class FrameSource(ABC):
     """Frame rate from the video header; None for image folders."""
     independent_reads: bool = False
     """Reading a frame touches no state another read uses, so `FrameCache` may decode the next
-    frame on a background thread (not a video: its decoder reads in order)."""
+    frames on background threads, several at once (not a video: its decoder reads in order)."""
 
     @abstractmethod
     def __len__(self) -> int:
@@ -328,12 +328,13 @@ class FrameCache:
     release the GIL, so a frame is ready when the trackers of the frame before are done): the
     caller gets the same frames in the same order, and a frame that cannot be read raises the
     source's own error when the caller asks for it, as without prefetching; a jump drops the
-    frames read ahead. One thread ("prefetch") serves every read-ahead of the cache, started on
-    the first and stopped by `close` (or when the cache is garbage-collected); a thread per
-    frame cost the caller ~0.1 ms a frame to start. It runs at a low priority
-    (`READ_AHEAD_NICENESS`): with tracking processes on every core it decodes in their idle
-    time instead of slowing them down, and several frames ahead it can use idle time wherever
-    it falls, not only in the one frame's time before that frame is needed.
+    frames read ahead. `READ_AHEAD_THREADS` threads ("prefetch") serve every read-ahead of the
+    cache, started on the first and stopped by `close` (or when the cache is garbage-collected);
+    a thread per frame cost the caller ~0.1 ms a frame to start. They run at a low priority
+    (`READ_AHEAD_NICENESS`): with tracking processes on every core they decode in their idle
+    time instead of slowing them down, and several frames ahead on two threads they can use
+    idle time wherever and on whichever core it falls, not only in the one frame's time before
+    that frame is needed.
     """
 
     def __init__(self, frames: FrameSource, size: int, *, prefetch: bool = True) -> None:
@@ -365,7 +366,9 @@ class FrameCache:
         if self.prefetch and index == self._last_read + 1:
             if self._reader is None:
                 self._reader = ThreadPoolExecutor(
-                    max_workers=1, thread_name_prefix="prefetch", initializer=_yield_to_trackers
+                    max_workers=READ_AHEAD_THREADS,
+                    thread_name_prefix="prefetch",
+                    initializer=_yield_to_trackers,
                 )
             last = min(index + READ_AHEAD_FRAMES, len(self.frames) - 1)
             for following in range(index + 1, last + 1):
@@ -405,6 +408,11 @@ READ_AHEAD_FRAMES = 3
 """Frames a `FrameCache` decodes ahead of the caller: with two tracking processes on two cores,
 three let the decoding fill idle time that one frame ahead leaves unused (72.2 against 69.7
 frames/s, docs/benchmarks.md, round 19); six gave no more."""
+
+READ_AHEAD_THREADS = 2
+"""Threads decoding the frames read ahead: two can fill idle time on both cores at once
+(71.2 -> 73.9 frames/s with two tracking processes; one thread tracking: no change; three:
+72.9 against 74.0)."""
 
 READ_AHEAD_NICENESS = 19
 """Scheduling niceness of the read-ahead thread (Linux: per thread): it decodes on a core the
