@@ -324,7 +324,7 @@ class FrameCache:
     decoding again.
 
     Reading frames in order from a source whose reads are independent (image files) reads the
-    next `READ_AHEAD_FRAMES` frames on a background thread meanwhile (`prefetch`; the decoders
+    next `READ_AHEAD_FRAMES` frames on background threads meanwhile (`prefetch`; the decoders
     release the GIL, so a frame is ready when the trackers of the frame before are done): the
     caller gets the same frames in the same order, and a frame that cannot be read raises the
     source's own error when the caller asks for it, as without prefetching; a jump drops the
@@ -383,9 +383,7 @@ class FrameCache:
         other frames read ahead."""
         future = self._pending.pop(index, None)
         if future is None or index != self._last_read + 1:
-            for stale in self._pending.values():
-                stale.cancel()
-            self._pending.clear()  # a jump: the frames read ahead are not needed next after all
+            self._drop_read_ahead()  # a jump: the others are not needed next after all
             if future is None:
                 return None
         try:
@@ -394,19 +392,23 @@ class FrameCache:
             return None
 
     def close(self) -> None:
-        """Stop the read-ahead thread (after the read in progress); reads go on without it."""
+        """Stop the read-ahead threads (after the reads in progress); reads go on without them."""
         self.prefetch = False
-        for future in self._pending.values():
-            future.cancel()
-        self._pending = {}
+        self._drop_read_ahead()
         if self._reader is not None:
             self._reader.shutdown(wait=True)
             self._reader = None
 
+    def _drop_read_ahead(self) -> None:
+        """Forget every frame read ahead; those not started yet are not read at all."""
+        for future in self._pending.values():
+            future.cancel()
+        self._pending.clear()
+
 
 READ_AHEAD_FRAMES = 3
 """Frames a `FrameCache` decodes ahead of the caller: with two tracking processes on two cores,
-three let the decoding fill idle time that one frame ahead leaves unused (72.2 against 69.7
+three let the decoding fill idle time that one frame ahead leaves unused (71.1 against 69.7
 frames/s, docs/benchmarks.md, round 19); six gave no more."""
 
 READ_AHEAD_THREADS = 2
@@ -415,7 +417,7 @@ READ_AHEAD_THREADS = 2
 72.9 against 74.0)."""
 
 READ_AHEAD_NICENESS = 19
-"""Scheduling niceness of the read-ahead thread (Linux: per thread): it decodes on a core the
+"""Scheduling niceness of the read-ahead threads (Linux: per thread): they decode on a core the
 trackers leave idle rather than taking turns with them (docs/benchmarks.md, Speed)."""
 
 
