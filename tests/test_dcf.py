@@ -177,6 +177,42 @@ def test_global_variation_uses_the_spectral_norm_and_flags_blow_ups():
     assert not regularization.is_aberrant(0.29, 0.3)
 
 
+@pytest.mark.parametrize(
+    "shape", [(1, 1), (1, 6), (6, 1), (2, 2), (3, 7), (7, 3), (50, 50), (49, 51)]
+)
+def test_spectral_norm_equals_lapacks_largest_singular_value(shape):
+    rng = np.random.default_rng(sum(shape))
+    # Dense, low-rank, clustered and graded matrices: LAPACK's gesdd is the reference.
+    left = np.linalg.qr(rng.normal(size=(shape[0], shape[0])))[0]
+    right = np.linalg.qr(rng.normal(size=(shape[1], shape[1])))[0]
+    rank = min(shape)
+    cases = {
+        "dense": rng.random(shape),
+        "heavy-tailed": rng.random(shape) ** 6 * 1e3,
+        "rank one": np.outer(rng.random(shape[0]), rng.random(shape[1])),
+        "two equal largest": left[:, :rank]
+        @ np.diag([5.0, 5.0, *np.linspace(1, 0, rank)][:rank])
+        @ right[:rank],
+        "graded": left[:, :rank] @ np.diag(np.logspace(0, -12, rank)) @ right[:rank],
+    }
+    for name, matrix in cases.items():
+        for values in (matrix, matrix.astype(np.float32)):
+            expected = np.linalg.svd(values.astype(np.float64), compute_uv=False)[0]
+            got = regularization.spectral_norm(values)
+            assert got == pytest.approx(expected, rel=1e-13, abs=0.0), name
+
+
+def test_spectral_norm_of_edge_cases():
+    assert regularization.spectral_norm(np.zeros((5, 5), np.float32)) == 0.0
+    assert regularization.spectral_norm(np.zeros((0, 4))) == 0.0
+    assert regularization.spectral_norm(np.diag([3.0, -4.0, 1.0])) == pytest.approx(4.0, rel=1e-15)
+    assert regularization.spectral_norm(np.full((50, 50), 2.0, np.float32)) == pytest.approx(100.0)
+    for bad in (np.inf, -np.inf, np.nan):
+        matrix = np.ones((4, 3))
+        matrix[2, 1] = bad
+        assert regularization.spectral_norm(matrix) == math.inf
+
+
 def test_centred_response_is_numpys_fftshift_as_float32():
     rng = np.random.default_rng(7)
     for shape in ((50, 50), (37, 44), (1, 1), (2, 3)):
