@@ -37,7 +37,6 @@ RELEASING = (
     "channel_energy",
     "scaled_sum",
     "apply_gain",
-    "update_multiplier",
     "pypocketfft",
     "c_einsum",
 )

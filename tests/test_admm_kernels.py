@@ -50,18 +50,6 @@ def test_admm_kernels_equal_numpy_bit_for_bit(monkeypatch, dataset, name):
             admm_kernels.scaled_sum(g_prev, multiplier, np.float32(gamma), got)
             np.testing.assert_array_equal(got, expected)
 
-            expected = multiplier.copy()
-            expected += np.float32(gamma) * (g_prev - xf)
-            got = multiplier.copy()
-            admm_kernels.update_multiplier(got, g_prev, xf, np.float32(gamma), got)
-            np.testing.assert_array_equal(got, expected)
-            # from a zero multiplier into another buffer (ADMM's first update)
-            expected = np.zeros_like(xf)
-            expected += np.float32(gamma) * (g_prev - xf)
-            got = np.full_like(xf, np.nan)
-            admm_kernels.update_multiplier(np.zeros_like(xf), g_prev, xf, np.float32(gamma), got)
-            np.testing.assert_array_equal(got.view(np.uint64), expected.view(np.uint64))
-
 
 def _train_filter_before_the_workspace(
     xf, yf, g_prev, window, theta_start, settings, transform, rule

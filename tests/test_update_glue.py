@@ -72,13 +72,13 @@ def test_global_variation_equals_svdvals_on_real_variations(monkeypatch, dataset
 def test_h_step_gain_equals_numpy_on_real_windows(monkeypatch, dataset, name):
     """The kernel's gain against the numpy expression it replaces, on the spatial windows
     (ASR, eq. 3) and the gamma sequence of real trainings, bit for bit."""
-    calls = _recorded(monkeypatch, dcf, "solve_h_step")
+    calls = _recorded(monkeypatch, dcf, "_h_step_gain")
     tracker, _ = _run(dataset, name, 8)
     monkeypatch.undo()
     assert len(calls) >= 2 * 7
     lam = tracker.admm.lambda_spatial
     cells = tracker.grid_size[0] * tracker.grid_size[1]
-    windows = {window.tobytes(): window for _, _, window, *_ in calls}
+    windows = {window.tobytes(): window for window, *_ in calls}
     assert len(windows) > 2  # the ASR window changes from frame to frame
     rng = np.random.default_rng(5)  # and windows whose values vary more than u's few levels
     shape = next(iter(windows.values())).shape
@@ -94,10 +94,11 @@ def test_h_step_gain_equals_numpy_on_real_windows(monkeypatch, dataset, name):
 def test_h_step_with_numpy_scalars_keeps_numpys_promotion(monkeypatch):
     """A float64 numpy lambda makes numpy compute the gain in float64 (then round once): the
     kernel, whose Python numbers act as float32, is not used for it."""
-    calls = _recorded(monkeypatch, dcf, "solve_h_step")
+    calls = _recorded(monkeypatch, dcf, "train_filter")
     _run("DTB70", "Surfing06", 4)
     monkeypatch.undo()
-    g_f, l_f, window, _, _, transform = calls[-1]
+    xf, _, g_f, window, _, _, transform, *_ = calls[-1]
+    l_f = (xf - g_f) * np.float32(0.37)  # a multiplier of the spectra's size and scale
     for lam in (np.float64(0.0137), 0.0137):
         got = np.array(dcf.solve_h_step(g_f, l_f, window, 10.0, lam, transform))
         cells = transform.grid_size[0] * transform.grid_size[1]

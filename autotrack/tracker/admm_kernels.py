@@ -74,37 +74,6 @@ def apply_gain(maps, gain, out):
                 out[k, r, c] = maps[k, r, c] * gain[r, c]
 
 
-def update_multiplier(
-    l_f: np.ndarray, g_f: np.ndarray, h_f: np.ndarray, gamma: np.float32, out: np.ndarray
-) -> None:
-    """out = l + gamma (g - h), the multiplier update (eq. 14), in place when `out` is `l_f`;
-    numpy: l_f += np.float32(gamma) * (g_f - h_f).
-
-    In place it runs its own kernel: given `out` and `l` as two arguments that overlap, LLVM's
-    run-time overlap check sends the loop to its scalar version (4x slower at 42 x 50 x 26);
-    reading and writing through one array needs no check."""
-    if out is l_f:
-        flat = [_parts(spectrum).reshape(-1) for spectrum in (l_f, g_f, h_f)]
-        _update_multiplier_in_place(*flat, gamma)
-    else:
-        _update_multiplier_kernel(_parts(l_f), _parts(g_f), _parts(h_f), gamma, _parts(out))
-
-
-@njit(cache=True, nogil=True, fastmath=False)
-def _update_multiplier_kernel(l_parts, g_parts, h_parts, gamma, out):
-    channels, rows, parts = l_parts.shape
-    for k in range(channels):
-        for r in range(rows):
-            for p in range(parts):
-                out[k, r, p] = l_parts[k, r, p] + gamma * (g_parts[k, r, p] - h_parts[k, r, p])
-
-
-@njit(cache=True, nogil=True, fastmath=False)
-def _update_multiplier_in_place(l_values, g_values, h_values, gamma):
-    for i in range(l_values.size):  # flat float32 views of the spectra
-        l_values[i] = l_values[i] + gamma * (g_values[i] - h_values[i])
-
-
 def _parts(spectrum: np.ndarray) -> np.ndarray:
     """A complex64 (channels, rows, cols) spectrum as float32 (channels, rows, 2 cols): the real
     and imaginary parts side by side, a view. Sums, differences and products by a real scalar
@@ -116,10 +85,14 @@ def _parts(spectrum: np.ndarray) -> np.ndarray:
 class AdmmWorkspace:
     """Buffers of one tracker's ADMM training, reused frame after frame (a tracker trains on one
     thread at a time): all-zero spectra standing for the first iteration's h and multiplier
-    (never written), the multiplier, the per-frequency sum_k |x_k|^2 and the h-step's gain."""
+    (never written), two multiplier buffers (each update reads one and writes the other), the
+    per-frequency sum_k |x_k|^2 and the h-step's gain."""
 
     def __init__(self, spectrum_shape: tuple[int, int, int], grid_size: tuple[int, int]) -> None:
         self.zeros = np.zeros(spectrum_shape, np.complex64)
-        self.multiplier = np.empty(spectrum_shape, np.complex64)
+        self.multipliers = (
+            np.empty(spectrum_shape, np.complex64),
+            np.empty(spectrum_shape, np.complex64),
+        )
         self.s_xx = np.empty(spectrum_shape[1:], np.float32)
         self.gain = np.empty(grid_size, np.float32)

@@ -128,7 +128,18 @@ class SpectrumTransform:
 
         Returns a buffer the next `project` call overwrites.
         """
-        admm_kernels.scaled_sum(g_f, l_f, np.float32(gamma), self._inverse.input_array)
+        admm_kernels.scaled_sum(g_f, l_f, np.float32(gamma), self.h_step_input)
+        return self.project_input(gain)
+
+    @property
+    def h_step_input(self) -> np.ndarray:
+        """The inverse plan's own complex64 input buffer: gamma (g + l) written here (by
+        `project`, or by the training's g-step as it computes g) is what `project_input`
+        transforms."""
+        return self._inverse.input_array
+
+    def project_input(self, gain: np.ndarray) -> np.ndarray:
+        """F(gain * F^-1(`h_step_input`)), in a buffer the next projection overwrites."""
         maps = self._inverse()  # on its own buffers; the call (not execute) scales by 1 / N
         admm_kernels.apply_gain(maps, gain, self._h_forward.input_array)
         return self._h_forward()
@@ -157,7 +168,23 @@ class AdmmSettings:
 
 @njit(cache=True, nogil=True, fastmath=False)
 def _g_step_kernel(
-    xf, yf, h_f, l_f, g_prev, s_xx, s_gx_prev, gamma, theta, num_cells, zero_start, g_out
+    xf,
+    yf,
+    h_f,
+    l_f,
+    g_prev,
+    s_xx,
+    s_gx_prev,
+    gamma,
+    theta,
+    num_cells,
+    zero_start,
+    g_out,
+    g_last,
+    multiplier_gamma,
+    l_out,
+    sum_gamma,
+    sum_out,
 ):
     # Spectra come in as (channels, frequencies) and per-frequency terms as (frequencies,):
     # flat views of the (rows, half columns) grid, so each loop over a channel is one run of
@@ -169,7 +196,14 @@ def _g_step_kernel(
     # values as the complex arithmetic with a zero imaginary part at half the work.
     # `zero_start`: h and l are all zero (the first iteration), so their channel sums are +0
     # for finite x, the value the skipped loop would produce.
+    # Two steps of the ADMM loop ride along (each is skipped for an empty out array): with
+    # `l_out`, the previous iteration's multiplier update l += gamma' (g' - h) (eq. 14, g' =
+    # `g_last`, gamma' = `multiplier_gamma`) is taken first, into `l_out`, and the g-step uses
+    # it as its l; with `sum_out`, the h-step's input sum_gamma (g + l) (eq. 12) is written as g
+    # is. Both in float32 on each part, as the separate kernels took them, so the same bits.
     channels, frequencies = xf.shape
+    update_multiplier = l_out.shape[0] > 0
+    write_sum = sum_out.shape[0] > 0
     scale = np.float32(1.0 / (gamma + theta))
     t_scale = np.float32(scale / num_cells)
     gamma_scale = np.float32(gamma * scale)
@@ -179,15 +213,30 @@ def _g_step_kernel(
     s_hx_im = np.zeros(frequencies, np.float32)
     s_lx_re = np.zeros(frequencies, np.float32)
     s_lx_im = np.zeros(frequencies, np.float32)
-    for k in range(0 if zero_start else channels):
-        x_k, h_k, l_k = xf[k], h_f[k], l_f[k]
-        for j in range(frequencies):
-            x, h, m = x_k[j], h_k[j], l_k[j]
-            # conj(x) h and conj(x) l
-            s_hx_re[j] += x.real * h.real + x.imag * h.imag
-            s_hx_im[j] += x.real * h.imag - x.imag * h.real
-            s_lx_re[j] += x.real * m.real + x.imag * m.imag
-            s_lx_im[j] += x.real * m.imag - x.imag * m.real
+    if update_multiplier:
+        for k in range(channels):
+            x_k, h_k, l_k, q_k, m_k = xf[k], h_f[k], l_f[k], g_last[k], l_out[k]
+            for j in range(frequencies):
+                x, h, before, q = x_k[j], h_k[j], l_k[j], q_k[j]
+                m_re = before.real + multiplier_gamma * (q.real - h.real)
+                m_im = before.imag + multiplier_gamma * (q.imag - h.imag)
+                m_k[j] = complex(m_re, m_im)
+                # conj(x) h and conj(x) l
+                s_hx_re[j] += x.real * h.real + x.imag * h.imag
+                s_hx_im[j] += x.real * h.imag - x.imag * h.real
+                s_lx_re[j] += x.real * m_re + x.imag * m_im
+                s_lx_im[j] += x.real * m_im - x.imag * m_re
+        l_f = l_out
+    else:
+        for k in range(0 if zero_start else channels):
+            x_k, h_k, l_k = xf[k], h_f[k], l_f[k]
+            for j in range(frequencies):
+                x, h, m = x_k[j], h_k[j], l_k[j]
+                # conj(x) h and conj(x) l
+                s_hx_re[j] += x.real * h.real + x.imag * h.imag
+                s_hx_im[j] += x.real * h.imag - x.imag * h.real
+                s_lx_re[j] += x.real * m.real + x.imag * m.imag
+                s_lx_im[j] += x.real * m.imag - x.imag * m.real
     # x^H rho / ((gamma + theta) B), with B = x^H x + T (gamma + theta)
     proj_re = np.empty(frequencies, np.float32)
     proj_im = np.empty(frequencies, np.float32)
@@ -232,6 +281,8 @@ def _g_step_kernel(
                 - (x.real * pi + x.imag * pr)
             )
             out_k[j] = complex(g_re, g_im)
+            if write_sum:
+                sum_out[k, j] = complex(sum_gamma * (g_re + m.real), sum_gamma * (g_im + m.imag))
 
 
 def solve_g_step(
@@ -255,6 +306,48 @@ def solve_g_step(
     frame and passed in precomputed. `zero_start` says h and l are all zero (ADMM's first
     iteration): their sums over channels are then not computed.
     """
+    return _fused_g_step(
+        xf, yf, h_f, l_f, g_prev, s_xx, s_gx_prev, gamma, theta, num_cells, zero_start
+    )
+
+
+_NO_SPECTRA = np.zeros((0, 0), np.complex64)
+"""The fused g-step's stand-in for a step it does not take (an out array with no channels, so
+nothing is ever written to it; writeable, as the kernel's one signature takes it)."""
+
+
+def _fused_g_step(
+    xf: np.ndarray,
+    yf: np.ndarray,
+    h_f: np.ndarray,
+    l_f: np.ndarray,
+    g_prev: np.ndarray,
+    s_xx: np.ndarray,
+    s_gx_prev: np.ndarray,
+    gamma: float,
+    theta: float,
+    num_cells: int,
+    zero_start: bool,
+    multiplier_update: tuple[np.ndarray, float, np.ndarray] | None = None,
+    h_step_input: tuple[float, np.ndarray] | None = None,
+) -> np.ndarray:
+    """`solve_g_step`, with the neighbouring ADMM steps in the same passes over the spectra.
+
+    `multiplier_update` (g', gamma', out): first l' = l + gamma' (g' - h) into `out` (eq. 14
+    of the previous iteration), which the g-step then uses as its l. `h_step_input` (gamma,
+    out): also writes gamma (g + l) into `out`, the h-step's input (eq. 12). The results are
+    those of the separate steps bit for bit.
+    """
+    g_last, multiplier_gamma, l_out = (
+        (_by_channel(multiplier_update[0]), multiplier_update[1], _by_channel(multiplier_update[2]))
+        if multiplier_update is not None
+        else (_NO_SPECTRA, 0.0, _NO_SPECTRA)
+    )
+    sum_gamma, sum_out = (
+        (h_step_input[0], _by_channel(h_step_input[1]))
+        if h_step_input is not None
+        else (0.0, _NO_SPECTRA)
+    )
     g_f = np.empty(xf.shape, xf.dtype)  # C-contiguous, so `_by_channel` is a view of it
     _g_step_kernel(
         _by_channel(xf),
@@ -269,6 +362,11 @@ def solve_g_step(
         num_cells,
         bool(zero_start),
         _by_channel(g_f),
+        g_last,
+        np.float32(multiplier_gamma),
+        l_out,
+        np.float32(sum_gamma),
+        sum_out,
     )
     return g_f
 
@@ -291,6 +389,14 @@ def solve_h_step(
 
     The result lives in `transform`'s buffer, overwritten by the next h-step.
     """
+    gain = _h_step_gain(spatial_window, gamma, lambda_spatial, transform)
+    return transform.project(g_f, l_f, gamma, gain)
+
+
+def _h_step_gain(
+    spatial_window: np.ndarray, gamma: float, lambda_spatial: float, transform: SpectrumTransform
+) -> np.ndarray:
+    """The h-step's per-cell gain T / (lambda u^2 + gamma T), T = the number of cells (eq. 12)."""
     num_cells = transform.grid_size[0] * transform.grid_size[1]
     # Python numbers act as float32 beside a float32 window (numpy scalars would not).
     scalars = type(lambda_spatial) in (float, int) and type(gamma) in (float, int)
@@ -303,10 +409,9 @@ def solve_h_step(
         admm_kernels.h_step_gain(
             spatial_window, float(lambda_spatial), float(gamma), num_cells, gain
         )
-    else:
-        gain = num_cells / (lambda_spatial * spatial_window**2 + gamma * num_cells)
-        gain = gain.astype(np.float32)
-    return transform.project(g_f, l_f, gamma, gain)
+        return gain
+    gain = num_cells / (lambda_spatial * spatial_window**2 + gamma * num_cells)
+    return gain.astype(np.float32)
 
 
 def train_filter(
@@ -323,6 +428,11 @@ def train_filter(
 
     `theta_of_filter(g_f, iteration)` re-estimates theta after the g/h steps of an iteration
     (eq. 13); it returns None to keep theta unchanged.
+
+    Each iteration's g-step also writes the h-step's input gamma (g + l) and takes the previous
+    iteration's multiplier update l += gamma (g - h) (eq. 14) first (`_fused_g_step`): the
+    same steps in the same order, in fewer passes over the spectra. The multiplier alternates
+    between two buffers, so a kernel never reads and writes one array through two arguments.
     """
     num_cells = transform.grid_size[0] * transform.grid_size[1]
     work = transform.workspace()
@@ -332,20 +442,35 @@ def train_filter(
     s_gx_prev = np.sum(np.conj(xf) * g_prev, axis=0)
     gamma = float(settings.gamma_init)
     theta = float(theta_start)
+    multiplier_update = None  # (g, gamma, buffer) of the update eq. 14 still owes
     for iteration in range(1, settings.iterations + 1):
-        g_f = solve_g_step(
-            xf, yf, h_f, l_f, g_prev, s_xx, s_gx_prev, gamma, theta, num_cells, iteration == 1
+        last = iteration == settings.iterations  # its h, theta and multiplier would be unused
+        g_f = _fused_g_step(
+            xf,
+            yf,
+            h_f,
+            l_f,
+            g_prev,
+            s_xx,
+            s_gx_prev,
+            gamma,
+            theta,
+            num_cells,
+            iteration == 1,
+            multiplier_update,
+            None if last else (gamma, transform.h_step_input),
         )
-        if iteration == settings.iterations:
-            break  # the last h, theta and multiplier updates would not be used
-        h_f = solve_h_step(g_f, l_f, spatial_window, gamma, settings.lambda_spatial, transform)
+        if multiplier_update is not None:
+            l_f = multiplier_update[2]
+        if last:
+            break
+        gain = _h_step_gain(spatial_window, gamma, settings.lambda_spatial, transform)
+        h_f = transform.project_input(gain)
         if theta_of_filter is not None:
             new_theta = theta_of_filter(g_f, iteration)
             if new_theta is not None:
                 theta = float(new_theta)
-        # eq. 14: l += gamma (g - h), the first time from the zeros into the multiplier buffer
-        admm_kernels.update_multiplier(l_f, g_f, h_f, np.float32(gamma), work.multiplier)
-        l_f = work.multiplier
+        multiplier_update = (g_f, gamma, work.multipliers[iteration % 2])
         gamma = min(settings.gamma_step * gamma, settings.gamma_max)
     return g_f, theta
 
