@@ -178,6 +178,9 @@ def solve_g_step(
     theta: float,
     num_cells: int,
     zero_start: bool = False,
+    *,
+    multiplier_update: tuple[np.ndarray, float, np.ndarray] | None = None,
+    h_step_input: tuple[float, np.ndarray] | None = None,
 ) -> np.ndarray:
     """Sherman-Morrison closed form of the g-subproblem, per frequency (eqs. 10-11).
 
@@ -186,33 +189,12 @@ def solve_g_step(
     `s_xx` = sum_k |x_k|^2 and `s_gx_prev` = sum_k conj(x_k) g_prev_k are constant within a
     frame and passed in precomputed. `zero_start` says h and l are all zero (ADMM's first
     iteration): their sums over channels are then not computed.
-    """
-    return _fused_g_step(
-        xf, yf, h_f, l_f, g_prev, s_xx, s_gx_prev, gamma, theta, num_cells, zero_start
-    )
 
-
-def _fused_g_step(
-    xf: np.ndarray,
-    yf: np.ndarray,
-    h_f: np.ndarray,
-    l_f: np.ndarray,
-    g_prev: np.ndarray,
-    s_xx: np.ndarray,
-    s_gx_prev: np.ndarray,
-    gamma: float,
-    theta: float,
-    num_cells: int,
-    zero_start: bool,
-    multiplier_update: tuple[np.ndarray, float, np.ndarray] | None = None,
-    h_step_input: tuple[float, np.ndarray] | None = None,
-) -> np.ndarray:
-    """`solve_g_step`, with the neighbouring ADMM steps in the same passes over the spectra.
-
-    `multiplier_update` (g', gamma', out): first l' = l + gamma' (g' - h) into `out` (eq. 14
-    of the previous iteration), which the g-step then uses as its l. `h_step_input` (gamma,
-    out): also writes gamma (g + l) into `out`, the h-step's input (eq. 12). The results are
-    those of the separate steps bit for bit.
+    The neighbouring ADMM steps can run in the same passes over the spectra, with results
+    those of the separate steps bit for bit. `multiplier_update` (g', gamma', out): first
+    l' = l + gamma' (g' - h) into `out` (eq. 14 of the previous iteration), which the g-step
+    then uses as its l. `h_step_input` (gamma, out): also writes gamma (g + l) into `out`, the
+    h-step's input (eq. 12).
     """
     g_last, multiplier_gamma, l_out = (
         (_by_channel(multiplier_update[0]), multiplier_update[1], _by_channel(multiplier_update[2]))
@@ -306,7 +288,7 @@ def train_filter(
     (eq. 13); it returns None to keep theta unchanged.
 
     Each g-step also takes the previous multiplier update (eq. 14) and writes the h-step's input
-    (`_fused_g_step`); the multiplier alternates between two buffers (no in-place kernel call).
+    (`solve_g_step`'s keyword arguments); the multiplier alternates between two buffers (no in-place kernel call).
     """
     num_cells = transform.grid_size[0] * transform.grid_size[1]
     work = transform.workspace()
@@ -319,7 +301,7 @@ def train_filter(
     multiplier_update = None  # (g, gamma, buffer) of the update eq. 14 still owes
     for iteration in range(1, settings.iterations + 1):
         last = iteration == settings.iterations  # its h, theta and multiplier would be unused
-        g_f = _fused_g_step(
+        g_f = solve_g_step(
             xf,
             yf,
             h_f,
@@ -331,8 +313,8 @@ def train_filter(
             theta,
             num_cells,
             iteration == 1,
-            multiplier_update,
-            None if last else (gamma, transform.h_step_input),
+            multiplier_update=multiplier_update,
+            h_step_input=None if last else (gamma, transform.h_step_input),
         )
         if multiplier_update is not None:
             l_f = multiplier_update[2]
