@@ -299,14 +299,60 @@ def _gathered_row_sums(span, offsets, weight, target):
 
 
 @njit(cache=True, nogil=True, fastmath=False, error_model="numpy")
+def _rgb_taps(x_src, x_weight, x_offsets, taps):
+    """The horizontal taps of a three-channel crop by output column: the flat offset of the
+    first tap's red value in the crop's row (taps are consecutive columns, so tap j reads
+    offset + 3 j) and the taps' weights, padded with 0 to `taps` (a padded tap reads a pixel
+    of the row or of its zero tail: +0 added to a sum >= +0 leaves it as it is)."""
+    dst_w = x_offsets.shape[0] - 1
+    first_red = np.empty(dst_w, np.int64)
+    weight = np.zeros((dst_w, taps), np.float32)
+    for dx in range(dst_w):
+        first, last = x_offsets[dx], x_offsets[dx + 1]
+        first_red[dx] = 3 * x_src[first]
+        for j in range(last - first):
+            weight[dx, j] = x_weight[first + j]
+    return first_red, weight
+
+
+@njit(cache=True, nogil=True, fastmath=False, error_model="numpy", inline="always")
+def _rgb_row_sums(span, first_red, weight, target):
+    """`_gathered_row_sums` for two to four taps of a three-channel row, by output column: the
+    column's weights and first offset are loaded once for its three channels (a third of the
+    loads of the element-wise gather), every element's sum taken in OpenCV's order."""
+    taps = weight.shape[1]
+    if taps == 2:
+        for dx in range(first_red.shape[0]):
+            b, w0, w1 = first_red[dx], weight[dx, 0], weight[dx, 1]
+            target[3 * dx] = span[b] * w0 + span[b + 3] * w1
+            target[3 * dx + 1] = span[b + 1] * w0 + span[b + 4] * w1
+            target[3 * dx + 2] = span[b + 2] * w0 + span[b + 5] * w1
+    elif taps == 3:
+        for dx in range(first_red.shape[0]):
+            b, w0, w1, w2 = first_red[dx], weight[dx, 0], weight[dx, 1], weight[dx, 2]
+            target[3 * dx] = (span[b] * w0 + span[b + 3] * w1) + span[b + 6] * w2
+            target[3 * dx + 1] = (span[b + 1] * w0 + span[b + 4] * w1) + span[b + 7] * w2
+            target[3 * dx + 2] = (span[b + 2] * w0 + span[b + 5] * w1) + span[b + 8] * w2
+    else:
+        for dx in range(first_red.shape[0]):
+            b, w0, w1 = first_red[dx], weight[dx, 0], weight[dx, 1]
+            w2, w3 = weight[dx, 2], weight[dx, 3]
+            for c in range(3):
+                pair = span[b + c] * w0 + span[b + c + 3] * w1
+                target[3 * dx + c] = (pair + span[b + c + 6] * w2) + span[b + c + 9] * w3
+
+
+@njit(cache=True, nogil=True, fastmath=False, error_model="numpy")
 def _area_crop(image, top, left, src_h, src_w, out):
     """One large crop: ResizeArea_Invoker in the image's own (row, col, channel) layout.
 
     Each source row's horizontal sums are computed once (OpenCV recomputes a row shared by two
-    output rows, with the same result), up to four taps a pass over the whole output row
-    (scalar gathers from the row converted to float32 once: `_gathered_row_sums`); the vertical
-    pass then runs vectorised along the row. Transposing rows into SIMD lanes to avoid the
-    gathers was measured slower (docs/benchmarks.md, ninth round).
+    output rows, with the same result) from the row converted to float32 once; the vertical
+    pass then runs vectorised along the row. Three channels with two to four taps (RGB search
+    patches shrunk by less than ~3x) sum by output column (`_rgb_row_sums`); any other case up
+    to four taps a pass over the whole output row (`_gathered_row_sums`). numba does not
+    vectorise the gathers; transposing rows into SIMD lanes to avoid them was measured slower
+    (docs/benchmarks.md, ninth round).
     """
     height, width, channels = image.shape
     dst_h, dst_w = out.shape[0], out.shape[1]
@@ -318,16 +364,36 @@ def _area_crop(image, top, left, src_h, src_w, out):
     y_offsets = np.empty(dst_h + 1, np.int64)
     _area_taps(src_w, dst_w, x_src, x_weight, x_offsets)
     _area_taps(src_h, dst_h, y_src, y_weight, y_offsets)
-    index, weight, start, stop = _padded_row_taps(x_src, x_weight, x_offsets, left, width, channels)
     row_width = dst_w * channels
     horizontal = np.empty((src_h, row_width), np.float32)
     flat = image.reshape(height, width * channels)
-    span = np.empty(stop - start, np.float32)
-    for r in range(src_h):
-        pixels = flat[min(max(top + r, 0), height - 1)][start:stop]
-        for q in range(stop - start):
-            span[q] = np.float32(pixels[q])
-        _gathered_row_sums(span, index, weight, horizontal[r])
+    taps = np.max(x_offsets[1:] - x_offsets[:-1])
+    if channels == 3 and 2 <= taps <= 4:
+        first_red, weight = _rgb_taps(x_src, x_weight, x_offsets, taps)
+        span = np.zeros(3 * (src_w + taps), np.float32)  # the crop's row, then a zero tail
+        inside = left >= 0 and left + src_w <= width
+        for r in range(src_h):
+            pixels = flat[min(max(top + r, 0), height - 1)]
+            if inside:
+                row = pixels[3 * left : 3 * (left + src_w)]
+                for q in range(3 * src_w):
+                    span[q] = np.float32(row[q])
+            else:  # columns clamped into the image: the replicated border
+                for q in range(src_w):
+                    column = 3 * min(max(left + q, 0), width - 1)
+                    for c in range(3):
+                        span[3 * q + c] = np.float32(pixels[column + c])
+            _rgb_row_sums(span, first_red, weight, horizontal[r])
+    else:
+        index, weight, start, stop = _padded_row_taps(
+            x_src, x_weight, x_offsets, left, width, channels
+        )
+        span = np.empty(stop - start, np.float32)
+        for r in range(src_h):
+            pixels = flat[min(max(top + r, 0), height - 1)][start:stop]
+            for q in range(stop - start):
+                span[q] = np.float32(pixels[q])
+            _gathered_row_sums(span, index, weight, horizontal[r])
     _vertical_pass(horizontal, y_src, y_weight, y_offsets, out, np.empty(row_width, np.float32))
 
 
