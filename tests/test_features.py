@@ -265,6 +265,32 @@ def test_fhog_batch_equals_fhog_one_by_one():
         np.testing.assert_array_equal(features, fhog(patch))
 
 
+@pytest.mark.parametrize(
+    "shape",
+    [(33, 22, 22, 3), (5, 27, 18, 3), (4, 4, 26, 3), (7, 22, 22), (3, 21, 13, 2), (2, 9, 3, 3)],
+)
+def test_fhog_batch_side_by_side_equals_each_image_alone(shape):
+    """The batch takes its images' histograms side by side in one long row: every image's own
+    borders (one-sided gradients, edge cells), its unused last columns and its weight stay
+    its own, bit for bit, in colour, grey and other channel counts, and for widths that leave
+    columns over or no whole cell at all."""
+    rng = np.random.default_rng(sum(shape))
+    smooth = cv2.GaussianBlur(rng.integers(0, 256, (64, 64, 3), dtype=np.uint8), (0, 0), 2)
+    count, height, width = shape[:3]
+    patches = np.stack(
+        [
+            cv2.resize(smooth[i : i + 20 + 2 * i, i : i + 25 + i], (width, height))
+            for i in range(count)
+        ]
+    )
+    channels = shape[3] if len(shape) == 4 else 1
+    patches = np.ascontiguousarray(patches[..., :channels]).reshape(shape)
+    weights = rng.uniform(0.5, 1.5, count).astype(np.float32)
+    batch = fhog_batch(patches, sample_weights=weights)
+    for patch, weight, features in zip(patches, weights, batch, strict=True):
+        np.testing.assert_array_equal(features, fhog(patch)[..., :-1] * weight)
+
+
 def test_fhog_accepts_any_real_dtype():
     image = np.random.default_rng(9).integers(0, 256, (16, 20)).astype(np.uint8)
     reference = fhog(image)

@@ -112,29 +112,91 @@ def _bin_coordinates(n_pixels, cell):
     return first, frac
 
 
+@njit(cache=True, nogil=True, fastmath=False, error_model="numpy", inline="always")
+def _scatter_row(
+    flat,
+    weight,
+    orient,
+    x_first,
+    x_frac,
+    start,
+    first_cell,
+    sample_cells,
+    y0,
+    yd,
+    top,
+    hb,
+    wb,
+    used,
+):
+    """gradHist's bilinear vote in space of one image's `used` pixels of a row (from column
+    `start` of the row's `weight`, magnitude / cell^2, and `orient`, the bin's plane offset)
+    into the flat (bins, hb, wb) histogram, where the image's `sample_cells` cells of a row
+    start at column `first_cell`. Unsigned indices: no negative-index wraparound code."""
+    top = top + first_cell  # flat index of hist[0, y0, first_cell]
+    for within in range(used):
+        m = weight[start + within]
+        o = orient[start + within]
+        x0 = x_first[within]
+        xd = x_frac[within]
+        xyd = xd * yd
+        w00 = _ONE - xd - yd + xyd
+        w10 = yd - xyd
+        w01 = xd - xyd
+        w11 = xyd
+        has_left = x0 >= 0
+        has_right = x0 < sample_cells - 1
+        at = top + x0 + o  # hist[o, y0, x0] (o: the bin's plane offset); right cell: + 1
+        if y0 < 0:  # leading rows: only the cell row below the first centre line
+            if has_left:
+                flat[np.uint64(at + wb)] += w10 * m
+            if has_right:
+                flat[np.uint64(at + wb + 1)] += w11 * m
+        elif y0 < hb - 1:
+            if has_left:
+                flat[np.uint64(at)] += w00 * m
+                flat[np.uint64(at + wb)] += w10 * m
+            if has_right:
+                flat[np.uint64(at + 1)] += w01 * m
+                flat[np.uint64(at + wb + 1)] += w11 * m
+        else:  # final rows: no cell row below
+            if has_left:
+                flat[np.uint64(at)] += w00 * m
+            if has_right:
+                flat[np.uint64(at + 1)] += w01 * m
+
+
 @njit(cache=True, nogil=True, fastmath=False, error_model="numpy")
-def _gradient_histogram(planes, cell, n_bins, bins, hist):
+def _gradient_histogram(planes, cell, n_bins, bins, hist, sample_width, sample_cells):
     """gradMag (full orientation) + gradHist(softBin=-1): bilinear in space, hard in angle.
 
     `planes` is float32 (C, H, W), `bins` `orientation_bins(n_bins // 2)`, `hist` C-contiguous
     (>= n_bins, hb, wb), channel-major: a pixel's right cell is the next float, not n_bins on.
+    `planes` may hold several images side by side, `sample_width` columns each, whose
+    histograms `hist` then holds side by side, `sample_cells` columns each (one image: its
+    width and wb): each image's gradients, cells and borders are its own, and every cell sums
+    its pixels in the same order as for the image alone, so the same bits; the rows of all
+    the images run as one long row.
     The colour channel is chosen for the whole image first (`strongest_gradients`), then row by
     row in small vectorisable passes, branch-free where the data decide (random gradient
     signs would defeat branch prediction); the scatter indexes the flat histogram with unsigned
     indices (no negative-index wraparound code per access).
     """
     hb, wb = hist.shape[1], hist.shape[2]
-    rows, cols = hb * cell, wb * cell
+    rows = hb * cell
     inv_cell2 = _ONE / np.float32(cell) / np.float32(cell)
     unit = np.float32(_ACOS_STEPS)
     zero = np.float32(0.0)
-    x_first, x_frac = _bin_coordinates(cols, cell)
+    samples = wb // sample_cells
+    used = sample_cells * cell  # an image's columns that fill whole cells
+    cols = (samples - 1) * sample_width + used
+    x_first, x_frac = _bin_coordinates(used, cell)
     y_first, y_frac = _bin_coordinates(rows, cell)
     channels = planes.shape[0]
     grey_row = np.empty((3, cols), np.float32)  # a grey row's gx, gy and squared
     row_gx, row_gy, row_squared = grey_row[0], grey_row[1], grey_row[2]
     image_gx, image_gy, image_squared = strongest_gradients(
-        planes, rows if channels > 1 else 0, cols
+        planes, rows if channels > 1 else 0, cols, sample_width
     )
     table_index = np.empty(cols, np.uint32)
     weight = np.empty(cols, np.float32)
@@ -144,7 +206,7 @@ def _gradient_histogram(planes, cell, n_bins, bins, hist):
     for y in range(rows):
         if channels == 1:  # no choice to make: the row's gradients, kept in cache
             gx, gy, squared = row_gx, row_gy, row_squared
-            row_gradients(planes[0], y, gx, gy)
+            row_gradients(planes[0], y, gx, gy, sample_width)
             for x in range(cols):
                 squared[x] = gx[x] * gx[x] + gy[x] * gy[x]
         else:
@@ -165,46 +227,39 @@ def _gradient_histogram(planes, cell, n_bins, bins, hist):
         y0 = y_first[y]
         yd = y_frac[y]
         top = y0 * wb  # flat index of hist[0, y0, 0]
-        for x in range(cols):
-            m = weight[x]
-            o = orient[x]
-            x0 = x_first[x]
-            xd = x_frac[x]
-            xyd = xd * yd
-            w00 = _ONE - xd - yd + xyd
-            w10 = yd - xyd
-            w01 = xd - xyd
-            w11 = xyd
-            has_left = x0 >= 0
-            has_right = x0 < wb - 1
-            at = top + x0 + o  # hist[o, y0, x0] (o: the bin's plane offset); right cell: + 1
-            if y0 < 0:  # leading rows: only the cell row below the first centre line
-                if has_left:
-                    flat[np.uint64(at + wb)] += w10 * m
-                if has_right:
-                    flat[np.uint64(at + wb + 1)] += w11 * m
-            elif y0 < hb - 1:
-                if has_left:
-                    flat[np.uint64(at)] += w00 * m
-                    flat[np.uint64(at + wb)] += w10 * m
-                if has_right:
-                    flat[np.uint64(at + 1)] += w01 * m
-                    flat[np.uint64(at + wb + 1)] += w11 * m
-            else:  # final rows: no cell row below
-                if has_left:
-                    flat[np.uint64(at)] += w00 * m
-                if has_right:
-                    flat[np.uint64(at + 1)] += w01 * m
+        if samples == 1:
+            _scatter_row(flat, weight, orient, x_first, x_frac, 0, 0, wb, y0, yd, top, hb, wb, used)
+        else:  # image by image: the scatter is scalar code, and each image's cells its own
+            for sample in range(samples):
+                start, first_cell = sample * sample_width, sample * sample_cells
+                _scatter_row(
+                    flat,
+                    weight,
+                    orient,
+                    x_first,
+                    x_frac,
+                    start,
+                    first_cell,
+                    sample_cells,
+                    y0,
+                    yd,
+                    top,
+                    hb,
+                    wb,
+                    used,
+                )
     # Border cells only receive 7/8 of an interior cell's weight (gradHist, softBin odd).
     for o in range(n_bins):
-        for y in range(hb):
-            hist[o, y, 0] *= _BORDER_GAIN
-        for x in range(wb):
-            hist[o, 0, x] *= _BORDER_GAIN
-        for y in range(hb):
-            hist[o, y, wb - 1] *= _BORDER_GAIN
-        for x in range(wb):
-            hist[o, hb - 1, x] *= _BORDER_GAIN
+        for first in range(0, wb, sample_cells):
+            last = first + sample_cells - 1
+            for y in range(hb):
+                hist[o, y, first] *= _BORDER_GAIN
+            for x in range(first, last + 1):
+                hist[o, 0, x] *= _BORDER_GAIN
+            for y in range(hb):
+                hist[o, y, last] *= _BORDER_GAIN
+            for x in range(first, last + 1):
+                hist[o, hb - 1, x] *= _BORDER_GAIN
 
 
 @njit(cache=True, nogil=True, fastmath=False, error_model="numpy")
@@ -278,17 +333,26 @@ def _fhog_into(image, cell, n_orients, clip, bins, weights, out):
     3n+4 (the toolbox's zero channel) are left as they are.
 
     A float32 product rounds once wherever it is taken, so `out` holds exactly what the
-    unweighted features times the weights would give (weights of one give the features). The
-    normalisation runs along whole cell rows, one channel at a time, each texture sum still
-    taken over the orientations in the toolbox's order.
+    unweighted features times the weights would give (weights of one give the features).
     """
     hb, wb = out.shape[1], out.shape[2]
     if hb == 0 or wb == 0:
         return
-    n_bins = 2 * n_orients
     # The 2n sensitive bins then the n insensitive ones, channel-major (one plane per bin).
-    bins_by_channel = np.zeros((n_bins + n_orients, hb, wb), np.float32)
-    _gradient_histogram(planar_float32(image), cell, n_bins, bins, bins_by_channel)
+    bins_by_channel = np.zeros((3 * n_orients, hb, wb), np.float32)
+    planes = planar_float32(image)
+    _gradient_histogram(planes, cell, 2 * n_orients, bins, bins_by_channel, planes.shape[2], wb)
+    _normalised_cells(bins_by_channel, cell, n_orients, clip, weights, out)
+
+
+@njit(cache=True, nogil=True, fastmath=False, error_model="numpy", inline="always")
+def _normalised_cells(bins_by_channel, cell, n_orients, clip, weights, out):
+    """hogChannels on the 2n sensitive bins of `bins_by_channel` (3n, hb, wb; the n insensitive
+    ones are written here), times `weights`, into `out` as `_fhog_into` describes. The
+    normalisation runs along whole cell rows, one channel at a time, each texture sum still
+    taken over the orientations in the toolbox's order."""
+    n_bins = 2 * n_orients
+    hb, wb = out.shape[1], out.shape[2]
     for o in range(n_orients):
         for y in range(hb):
             for x in range(wb):
@@ -312,13 +376,30 @@ def _fhog_into(image, cell, n_orients, clip, bins, weights, out):
 @njit(cache=True, nogil=True, fastmath=False, error_model="numpy")
 def _fhog_batch_into(images, cell, n_orients, clip, bins, sample_weights, out):
     """`_fhog_into` of each image into `out` (N, H//cell, W//cell, C), channel-last, all of
-    image i's values times `sample_weights[i]` (channels `_fhog_into` leaves stay zero)."""
+    image i's values times `sample_weights[i]` (channels `_fhog_into` leaves stay zero).
+
+    The images' histograms are taken side by side in one pass (`_gradient_histogram`), whose
+    rows then run N times as long: the scale filter's 22 x 22 samples gave rows of 20 pixels."""
     count, rows, cols, channels = out.shape
+    if count == 0 or rows == 0 or cols == 0:
+        out[:] = 0.0
+        return
+    height, width, colours = images.shape[1], images.shape[2], images.shape[3]
+    planes = np.empty((colours, height, count * width), np.float32)
+    for i in range(count):
+        sample = planar_float32(images[i])
+        for c in range(colours):
+            for y in range(height):
+                for x in range(width):
+                    planes[c, y, i * width + x] = sample[c, y, x]
+    side_by_side = np.zeros((3 * n_orients, rows, count * cols), np.float32)
+    _gradient_histogram(planes, cell, 2 * n_orients, bins, side_by_side, width, cols)
     weights = np.empty((rows, cols), np.float32)
     channel_first = np.zeros((channels, rows, cols), np.float32)
     for i in range(count):
         weights[:] = sample_weights[i]
-        _fhog_into(images[i], cell, n_orients, clip, bins, weights, channel_first)
+        own = np.ascontiguousarray(side_by_side[:, :, i * cols : (i + 1) * cols])
+        _normalised_cells(own, cell, n_orients, clip, weights, channel_first)
         target = out[i]
         for y in range(rows):
             for x in range(cols):

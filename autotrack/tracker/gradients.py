@@ -39,9 +39,11 @@ def planar_float32(image):
 
 
 @njit(cache=True, nogil=True, fastmath=False, error_model="numpy", inline="always")
-def row_gradients(plane, y, gx, gy):
+def row_gradients(plane, y, gx, gy, sample_width):
     """gradient2 on one row: centred differences, one-sided with factor 1 at the image border.
 
+    `plane` may hold several images side by side, each `sample_width` columns wide (the
+    image's own width for one): every image's first and last columns are then one-sided too.
     Written with offset views so every loop index is a plain range index (vectorisable).
     """
     height, width = plane.shape
@@ -59,6 +61,17 @@ def row_gradients(plane, y, gx, gy):
     gx[0] = row[1] - row[0]
     if cols == width:
         gx[cols - 1] = row[width - 1] - row[width - 2]
+    if sample_width < cols:  # images side by side: each one's own borders
+        _sample_borders(row, gx, sample_width)
+
+
+@njit(cache=True, nogil=True, fastmath=False, error_model="numpy")
+def _sample_borders(row, gx, sample_width):
+    """One-sided x-gradients at the first and last column of each image after the first, for
+    images side by side `sample_width` columns each (`row_gradients` did the outer borders)."""
+    for start in range(sample_width, gx.size, sample_width):
+        gx[start] = row[start + 1] - row[start]
+        gx[start - 1] = row[start - 1] - row[start - 2]
 
 
 @njit(cache=True, nogil=True, fastmath=False, error_model="numpy", inline="always")
@@ -74,7 +87,7 @@ def _stronger(best, best_x, best_y, candidate_x, candidate_y):
 
 
 @njit(cache=True, nogil=True, fastmath=False, error_model="numpy")
-def strongest_gradients(planes, rows, cols):
+def strongest_gradients(planes, rows, cols, sample_width):
     """gradMag's choice of channel: per pixel of the first `rows` x `cols`, the x and y
     gradients of the channel with the largest squared magnitude (a later channel only if
     strictly larger) and that magnitude, as three float32 (rows, cols) arrays.
@@ -86,7 +99,8 @@ def strongest_gradients(planes, rows, cols):
     plain store's rate (1.5x slower on RGB search patches; `benchmarks/kernel_asm.py` lists any
     kernel that has them). The comparisons and products are the same throughout. The
     whole image in one call: a call a row cost more than the work on the scale filter's small
-    samples. A grey image has no choice to make and is not passed (`rows` = 0).
+    samples. A grey image has no choice to make and is not passed (`rows` = 0). Images side by
+    side, `sample_width` columns each, take their gradients as `row_gradients` does.
     """
     channels = planes.shape[0]
     gradients = np.empty((3, rows, cols), np.float32)
@@ -97,9 +111,9 @@ def strongest_gradients(planes, rows, cols):
     for y in range(rows):
         row_gx, row_gy, row_squared = gx[y], gy[y], squared[y]
         if channels == 3:
-            row_gradients(planes[0], y, gx0, gy0)
-            row_gradients(planes[1], y, gx1, gy1)
-            row_gradients(planes[2], y, gx2, gy2)
+            row_gradients(planes[0], y, gx0, gy0, sample_width)
+            row_gradients(planes[1], y, gx1, gy1, sample_width)
+            row_gradients(planes[2], y, gx2, gy2, sample_width)
             for x in range(cols):
                 best_x, best_y = gx0[x], gy0[x]
                 best = best_x * best_x + best_y * best_y
@@ -107,11 +121,11 @@ def strongest_gradients(planes, rows, cols):
                 best, best_x, best_y = _stronger(best, best_x, best_y, gx2[x], gy2[x])
                 row_squared[x], row_gx[x], row_gy[x] = best, best_x, best_y
             continue
-        row_gradients(planes[0], y, row_gx, row_gy)
+        row_gradients(planes[0], y, row_gx, row_gy, sample_width)
         for x in range(cols):
             row_squared[x] = row_gx[x] * row_gx[x] + row_gy[x] * row_gy[x]
         for c in range(1, channels):  # another count: the choice into scratch, then copied
-            row_gradients(planes[c], y, gx0, gy0)
+            row_gradients(planes[c], y, gx0, gy0, sample_width)
             for x in range(cols):
                 chosen_squared[x], gx1[x], gy1[x] = _stronger(
                     row_squared[x], row_gx[x], row_gy[x], gx0[x], gy0[x]
