@@ -193,13 +193,15 @@ def h_step_gain(window, lambda_spatial, gamma, num_cells, out):
 
 
 @njit(cache=True, nogil=True, fastmath=False)
-def apply_gain(maps, gain, out):
-    """out = maps * gain[None]: the h-step's per-cell gain (eq. 12); numpy: h *= gain."""
+def apply_gain(maps, scale, gain, out):
+    """out = (maps * scale) * gain[None]: the inverse transform's 1 / N scaling, which pyFFTW's
+    call would take in a pass of its own (a float32 product, `fft_plans.inverse_unscaled`),
+    then the h-step's per-cell gain (eq. 12); numpy: h *= gain after the scaled inverse."""
     channels, rows, cols = maps.shape
     for k in range(channels):
         for r in range(rows):
             for c in range(cols):
-                out[k, r, c] = maps[k, r, c] * gain[r, c]
+                out[k, r, c] = (maps[k, r, c] * scale) * gain[r, c]
 
 
 def _parts(spectrum: np.ndarray) -> np.ndarray:

@@ -140,8 +140,8 @@ class SpectrumTransform:
 
     def project_input(self, gain: np.ndarray) -> np.ndarray:
         """F(gain * F^-1(`h_step_input`)), in a buffer the next projection overwrites."""
-        maps = self._inverse()  # on its own buffers; the call (not execute) scales by 1 / N
-        admm_kernels.apply_gain(maps, gain, self._h_forward.input_array)
+        maps, scale = fft_plans.inverse_unscaled(self._inverse)  # on its own buffers
+        admm_kernels.apply_gain(maps, scale, gain, self._h_forward.input_array)
         return self._h_forward()
 
 

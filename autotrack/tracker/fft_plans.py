@@ -86,7 +86,8 @@ class PlanSet:
     forward: object
     """r2c of (channels, rows, cols) float32 -> (channels, rows, cols // 2 + 1) complex64."""
     inverse: object
-    """c2r back (destroys its input; calling it scales by 1 / (rows cols))."""
+    """c2r back (destroys its input; calling it scales by 1 / (rows cols), `inverse_unscaled`
+    leaves the scaling to the caller)."""
     h_forward: object
     """A second r2c plan on its own arrays (the same plan as `forward`)."""
     effort: str
@@ -229,6 +230,17 @@ class PocketPlan:
         if self._inverse_size is None:
             return pocketfft.rfft2(source)
         return pocketfft.irfft2(source, self._inverse_size)
+
+
+def inverse_unscaled(plan: object) -> tuple[np.ndarray, np.float32]:
+    """An inverse plan's maps of its own input array, before pyFFTW's 1 / N scaling, and that
+    scale: pyFFTW's call multiplies its output by float32(1 / N) in a pass of its own, which
+    the caller folds into its next pass over the maps (the same float32 product, so the same
+    bits). pocketfft scales inside its transform: its maps, and a scale of 1."""
+    if isinstance(plan, PocketPlan):
+        return plan(), np.float32(1.0)
+    plan.execute()
+    return plan.output_array, np.float32(1.0 / plan.N)
 
 
 def _pocket_plans(shape: tuple[int, int, int]) -> PlanSet:
