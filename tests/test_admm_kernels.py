@@ -35,13 +35,70 @@ def _training_inputs(monkeypatch, dataset: str, name: str, frames: int = 6):
 SEQUENCES = [("DTB70", "Surfing06"), ("UAV123_10fps", "boat5"), ("OTB", "Crossing")]
 
 
+def _numpy_shift(xf, shift_rows, shift_cols):
+    """shift_spectrum as numpy computed it before its kernel: the broadcast complex64 product."""
+    rows, half = xf.shape[1], xf.shape[2]
+    ky = dcf.centred_frequencies(rows)
+    kx = np.arange(half, dtype=np.float64)
+    phase_rows = np.exp(1j * (2.0 * np.pi * shift_rows / rows) * ky).astype(np.complex64)
+    phase_cols = np.exp(1j * (2.0 * np.pi * shift_cols / rows) * kx).astype(np.complex64)
+    return xf * (phase_rows[:, None] * phase_cols[None, :])
+
+
+def _numpy_fuses_complex_products() -> bool:
+    """Whether numpy multiplies complex64 arrays with fused multiply-adds on this machine, as
+    `admm_kernels.complex_product` always does (numpy's AVX2 loops on x86-64 CPUs with FMA3):
+    where it does not, the kernels' products differ from numpy's in the last bit."""
+    rng = np.random.default_rng(0)
+    a, b = (rng.standard_normal((2, 4099, 2)) @ np.array([1, 1j])).astype(np.complex64)
+    fused = np.empty((1, a.size), np.complex64)
+    admm_kernels.shifted_spectrum(a[None], b, fused)
+    return bool(np.array_equal(fused[0], a * b))
+
+
+NUMPY_FUSES = _numpy_fuses_complex_products()
+needs_fused_numpy = pytest.mark.skipif(
+    not NUMPY_FUSES, reason="numpy's complex products are not fused on this CPU"
+)
+
+
+def _assert_products_equal(got: np.ndarray, expected: np.ndarray) -> None:
+    """Bit for bit where numpy fuses its complex products; else within float32 rounding."""
+    if NUMPY_FUSES:
+        np.testing.assert_array_equal(got.view(np.uint64), expected.view(np.uint64))
+    else:
+        np.testing.assert_allclose(got, expected, rtol=1e-5, atol=1e-6 * np.abs(expected).max())
+
+
+def test_complex_product_is_fused():
+    """The kernels' complex product rounds a * b + c once: where the unfused product (two
+    roundings) loses the answer, it keeps it."""
+    e = 2.0**-13  # re = (1 + e)(1 - e) - 1 * 1 = -e^2, but 1 - e^2 rounds to 1 in float32
+    a = np.array([1 + e + 1j], np.complex64)
+    b = np.array([1 - e + 1j], np.complex64)
+    out = np.empty((1, 1), np.complex64)
+    admm_kernels.shifted_spectrum(a[None], b, out)
+    assert out[0, 0].real == np.float32(-(e**2))
+    assert (a.real * b.real - a.imag * b.imag)[0] == np.float32(0.0)
+
+
 @needs_colour_table
 @pytest.mark.parametrize(("dataset", "name"), SEQUENCES)
 def test_admm_kernels_equal_numpy_bit_for_bit(monkeypatch, dataset, name):
     for xf, g_prev, _, _ in _training_inputs(monkeypatch, dataset, name):
         energy = np.empty(xf.shape[1:], np.float32)
-        admm_kernels.channel_energy(xf, energy)
+        s_gx = np.empty(xf.shape[1:], np.complex64)
+        flat = xf.reshape(len(xf), -1)
+        admm_kernels.training_sums(
+            flat, g_prev.reshape(len(xf), -1), energy.reshape(-1), s_gx.reshape(-1)
+        )
         np.testing.assert_array_equal(energy, np.sum(xf.real**2 + xf.imag**2, axis=0))
+        _assert_products_equal(s_gx, np.sum(np.conj(xf) * g_prev, axis=0))
+        for shift in ((0.0, 0.0), (1.37, -2.6), (-7.25, 11.0)):
+            got = dcf.shift_spectrum(xf, *shift, (xf.shape[1], xf.shape[1]))
+            expected = dcf.shift_spectrum(xf.astype(np.complex128), *shift, (xf.shape[1],) * 2)
+            np.testing.assert_allclose(got, expected, rtol=0, atol=1e-5 * np.abs(xf).max())
+            _assert_products_equal(got, _numpy_shift(xf, *shift))
 
         multiplier = (xf - g_prev) * np.float32(0.37)
         for gamma in (1.0, 10.0, 0.7312):
@@ -74,6 +131,7 @@ def _train_filter_before_the_workspace(
 
 
 @needs_colour_table
+@needs_fused_numpy
 @pytest.mark.parametrize(("dataset", "name"), SEQUENCES)
 def test_training_with_kept_buffers_equals_fresh_buffers_bit_for_bit(monkeypatch, dataset, name):
     """The workspace's buffers, reused frame after frame (the tracker's own, left as its last

@@ -4,12 +4,14 @@ bit for bit numpy's.
 
 Each kernel fuses what numpy computed as several whole-array operations with temporaries into
 one pass, following numpy's operation order and precision exactly: float32 / complex64
-arithmetic, one rounding per numpy operation, products of complex numbers only by real scalars
-(numpy multiplies two complex64 arrays with fused multiply-adds where the CPU has them, which
-a kernel could not follow on every machine), sums over the channel axis taken channel after
+arithmetic, one rounding per numpy operation, sums over the channel axis taken channel after
 channel (as numpy's reduction over the first axis of a C-contiguous array does), and no
-fastmath (no contraction into fused multiply-adds, no reassociation). tests/test_admm_kernels.py
-compares every kernel with the numpy expression it replaces on features of real sequences.
+fastmath (no contraction into fused multiply-adds, no reassociation). A product of two complex
+numbers is numpy's on x86-64 CPUs with FMA3 (its AVX2 loops): re = fma(a.re, b.re, -(a.im b.im)),
+im = fma(a.re, b.im, a.im b.re), with explicit fused multiply-adds (`complex_product`), so a
+kernel takes it the same way on every machine (numpy's own product differs only where numpy
+has no fused loop). tests/test_admm_kernels.py compares every kernel with the numpy expression
+it replaces on features of real sequences.
 
 Arrays are (channels, rows, half columns) complex64 spectra or (channels, rows, cols) float32
 maps, C-contiguous.
@@ -18,22 +20,67 @@ maps, C-contiguous.
 from __future__ import annotations
 
 import numpy as np
-from numba import njit
+from numba import njit, types
+from numba.extending import intrinsic
+
+
+@intrinsic
+def _fused_multiply_add(typingctx, a, b, c):
+    """a * b + c rounded once (llvm.fma: the FMA3 instruction, or libm's fmaf without it)."""
+    if not (a == types.float32 and b == types.float32 and c == types.float32):
+        return None
+
+    def codegen(context, builder, signature, args):
+        return builder.fma(*args)
+
+    return types.float32(types.float32, types.float32, types.float32), codegen
+
+
+@njit(cache=True, nogil=True, fastmath=False, inline="always")
+def complex_product(a_re, a_im, b_re, b_im):
+    """(re, im) of (a_re + i a_im)(b_re + i b_im), float32 parts, as numpy's AVX2 loops take a
+    complex64 product: with fused multiply-adds."""
+    return (
+        _fused_multiply_add(a_re, b_re, -(a_im * b_im)),
+        _fused_multiply_add(a_re, b_im, a_im * b_re),
+    )
 
 
 @njit(cache=True, nogil=True, fastmath=False)
-def channel_energy(xf, out):
-    """out = sum_k |x_k|^2 per frequency (float32); numpy: np.sum(xf.real**2 + xf.imag**2, axis=0)."""
-    channels, rows, cols = xf.shape
-    for r in range(rows):
-        for c in range(cols):
-            x = xf[0, r, c]
-            out[r, c] = x.real * x.real + x.imag * x.imag
+def shifted_spectrum(zf, phase, out):
+    """out = zf * phase[None]: every channel's spectrum times one phase ramp; numpy: the same
+    product, broadcast. Flat (channels, frequencies) and (frequencies,) views."""
+    channels, frequencies = zf.shape
+    for k in range(channels):
+        source, target = zf[k], out[k]
+        for j in range(frequencies):
+            z, p = source[j], phase[j]
+            re, im = complex_product(z.real, z.imag, p.real, p.imag)
+            target[j] = complex(re, im)
+
+
+@njit(cache=True, nogil=True, fastmath=False)
+def training_sums(xf, g_prev, s_xx, s_gx):
+    """The g-step's per-frequency terms constant within a frame, in one pass over the channels:
+    s_xx = sum_k |x_k|^2 (float32) and s_gx = sum_k conj(x_k) g_prev_k; numpy:
+    np.sum(xf.real**2 + xf.imag**2, axis=0) and np.sum(np.conj(xf) * g_prev, axis=0), whose
+    reductions start from the first channel's values. Flat (channels, frequencies) and
+    (frequencies,) views."""
+    channels, frequencies = xf.shape
+    x_0, g_0 = xf[0], g_prev[0]
+    for j in range(frequencies):
+        x, g = x_0[j], g_0[j]
+        s_xx[j] = x.real * x.real + x.imag * x.imag
+        re, im = complex_product(x.real, -x.imag, g.real, g.imag)
+        s_gx[j] = complex(re, im)
     for k in range(1, channels):
-        for r in range(rows):
-            for c in range(cols):
-                x = xf[k, r, c]
-                out[r, c] += x.real * x.real + x.imag * x.imag
+        x_k, g_k = xf[k], g_prev[k]
+        for j in range(frequencies):
+            x, g = x_k[j], g_k[j]
+            s_xx[j] += x.real * x.real + x.imag * x.imag
+            re, im = complex_product(x.real, -x.imag, g.real, g.imag)
+            total = s_gx[j]
+            s_gx[j] = complex(total.real + re, total.imag + im)
 
 
 NO_SPECTRA = np.zeros((0, 0), np.complex64)

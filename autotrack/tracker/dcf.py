@@ -294,8 +294,10 @@ def train_filter(
     work = transform.workspace()
     g_f = h_f = l_f = work.zeros  # h and the multiplier start at 0; g is set first
     s_xx = work.s_xx
-    admm_kernels.channel_energy(xf, s_xx)
-    s_gx_prev = np.sum(np.conj(xf) * g_prev, axis=0)
+    s_gx_prev = np.empty(s_xx.shape, np.complex64)
+    admm_kernels.training_sums(
+        _by_channel(xf), _by_channel(g_prev), s_xx.reshape(-1), s_gx_prev.reshape(-1)
+    )
     gamma = float(settings.gamma_init)
     theta = float(theta_start)
     multiplier_update = None  # (g, gamma, buffer) of the update eq. 14 still owes
@@ -477,4 +479,9 @@ def shift_spectrum(
     kx = np.arange(xf.shape[-1], dtype=np.float64)
     phase_rows = np.exp(1j * (2.0 * np.pi * shift_rows / grid_size[0]) * ky).astype(np.complex64)
     phase_cols = np.exp(1j * (2.0 * np.pi * shift_cols / grid_size[1]) * kx).astype(np.complex64)
-    return xf * (phase_rows[:, None] * phase_cols[None, :])
+    phase = phase_rows[:, None] * phase_cols[None, :]
+    if xf.dtype != np.complex64:
+        return xf * phase
+    shifted = np.empty(xf.shape, np.complex64)  # C-contiguous, so `_by_channel` is a view
+    admm_kernels.shifted_spectrum(_by_channel(xf), phase.reshape(-1), _by_channel(shifted))
+    return shifted
