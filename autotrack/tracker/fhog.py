@@ -30,21 +30,21 @@ import numpy as np
 from numba import njit
 
 from autotrack.errors import InputError
-from autotrack.tracker.gradients import planar_float32, row_gradients, strongest_gradients
+from autotrack.tracker.gradients import (
+    ACOS_OFFSET,
+    ACOS_PAD,
+    ACOS_STEPS,
+    gradient_histogram,
+    planar_float32,
+)
 
 FHOG_TRUNCATION_CHANNELS = 1
 """The toolbox appends one all-zero truncation channel; trackers drop it."""
 
 _PI = np.float32(3.14159265)  # the toolbox's PI (a float literal)
-_ACOS_STEPS = 10000  # acosTable: a[i] ~= acos(i / 10000)
-_ACOS_PAD = 10
-_ACOS_OFFSET = _ACOS_STEPS + _ACOS_PAD
 _TEXTURE_WEIGHT = np.float32(0.2357)  # ~ 1 / sqrt(18), hogChannels' r
 _HALF = np.float32(0.5)
 _ONE = np.float32(1.0)
-_MINUS_ONE = np.float32(-1.0)
-_BORDER_GAIN = np.float32(8.0) / np.float32(7.0)
-_ZERO_GRADIENT_INVERSE = np.float32(1e10)  # min(rsqrt(0), 1e10) in gradMag
 
 
 def fhog_channels(n_orients: int = 9) -> int:
@@ -60,13 +60,13 @@ def acos_table() -> np.ndarray:
     pi - 1e-6 (so that adding pi for negative y-gradients stays below 2 pi). Index with
     `int(x * 10000) + 10010`.
     """
-    table = np.empty(2 * _ACOS_OFFSET, dtype=np.float32)
-    steps = np.arange(-_ACOS_STEPS, _ACOS_STEPS, dtype=np.float32) / np.float32(_ACOS_STEPS)
-    table[:_ACOS_PAD] = _PI
-    table[_ACOS_PAD : _ACOS_PAD + 2 * _ACOS_STEPS] = np.arccos(steps.astype(np.float64))
-    table[_ACOS_PAD + 2 * _ACOS_STEPS :] = 0.0
+    table = np.empty(2 * ACOS_OFFSET, dtype=np.float32)
+    steps = np.arange(-ACOS_STEPS, ACOS_STEPS, dtype=np.float32) / np.float32(ACOS_STEPS)
+    table[:ACOS_PAD] = _PI
+    table[ACOS_PAD : ACOS_PAD + 2 * ACOS_STEPS] = np.arccos(steps.astype(np.float64))
+    table[ACOS_PAD + 2 * ACOS_STEPS :] = 0.0
     limit = _PI - np.float32(1e-6)
-    head = table[: _ACOS_OFFSET + _ACOS_STEPS // 10]
+    head = table[: ACOS_OFFSET + ACOS_STEPS // 10]
     head[head > limit] = limit
     table.flags.writeable = False
     return table
@@ -88,178 +88,10 @@ def orientation_bins(n_orients: int) -> np.ndarray:
     """The contrast-sensitive bin (of 2 n_orients) of each acos-table entry, read-only: entry
     i for a non-negative y-gradient, len(acos_table()) + i for a negative one. The per-pixel
     angle arithmetic done once per entry: the kernel reads a byte instead."""
-    bins = np.empty(4 * _ACOS_OFFSET, np.uint8 if n_orients <= 127 else np.int64)
+    bins = np.empty(4 * ACOS_OFFSET, np.uint8 if n_orients <= 127 else np.int64)
     _orientation_bin_table(acos_table(), 2 * n_orients, bins)
     bins.flags.writeable = False
     return bins
-
-
-@njit(cache=True, nogil=True, fastmath=False, error_model="numpy")
-def _bin_coordinates(n_pixels, cell):
-    """Per pixel: left/top cell index (-1 before the first centre) and fractional offset.
-
-    Accumulates (i + 0.5) / cell - 0.5 in float32 exactly as gradHist does.
-    """
-    first = np.empty(n_pixels, np.int64)
-    frac = np.empty(n_pixels, np.float32)
-    step = _ONE / np.float32(cell)
-    position = _HALF * step - _HALF
-    for i in range(n_pixels):
-        index = -1 if i < cell // 2 else int(position)
-        first[i] = index
-        frac[i] = position - np.float32(index)
-        position += step
-    return first, frac
-
-
-@njit(cache=True, nogil=True, fastmath=False, error_model="numpy", inline="always")
-def _scatter_row(
-    flat,
-    weight,
-    orient,
-    x_first,
-    x_frac,
-    start,
-    first_cell,
-    sample_cells,
-    y0,
-    yd,
-    top,
-    hb,
-    wb,
-    used,
-):
-    """gradHist's bilinear vote in space of one image's `used` pixels of a row (from column
-    `start` of the row's `weight`, magnitude / cell^2, and `orient`, the bin's plane offset)
-    into the flat (bins, hb, wb) histogram, where the image's `sample_cells` cells of a row
-    start at column `first_cell`. Unsigned indices: no negative-index wraparound code."""
-    top = top + first_cell  # flat index of hist[0, y0, first_cell]
-    for within in range(used):
-        m = weight[start + within]
-        o = orient[start + within]
-        x0 = x_first[within]
-        xd = x_frac[within]
-        xyd = xd * yd
-        w00 = _ONE - xd - yd + xyd
-        w10 = yd - xyd
-        w01 = xd - xyd
-        w11 = xyd
-        has_left = x0 >= 0
-        has_right = x0 < sample_cells - 1
-        at = top + x0 + o  # hist[o, y0, x0] (o: the bin's plane offset); right cell: + 1
-        if y0 < 0:  # leading rows: only the cell row below the first centre line
-            if has_left:
-                flat[np.uint64(at + wb)] += w10 * m
-            if has_right:
-                flat[np.uint64(at + wb + 1)] += w11 * m
-        elif y0 < hb - 1:
-            if has_left:
-                flat[np.uint64(at)] += w00 * m
-                flat[np.uint64(at + wb)] += w10 * m
-            if has_right:
-                flat[np.uint64(at + 1)] += w01 * m
-                flat[np.uint64(at + wb + 1)] += w11 * m
-        else:  # final rows: no cell row below
-            if has_left:
-                flat[np.uint64(at)] += w00 * m
-            if has_right:
-                flat[np.uint64(at + 1)] += w01 * m
-
-
-@njit(cache=True, nogil=True, fastmath=False, error_model="numpy")
-def _gradient_histogram(planes, cell, n_bins, bins, hist, sample_width, sample_cells):
-    """gradMag (full orientation) + gradHist(softBin=-1): bilinear in space, hard in angle.
-
-    `planes` is float32 (C, H, W), `bins` `orientation_bins(n_bins // 2)`, `hist` C-contiguous
-    (>= n_bins, hb, wb), channel-major: a pixel's right cell is the next float, not n_bins on.
-    `planes` may hold several images side by side, `sample_width` columns each, whose
-    histograms `hist` then holds side by side, `sample_cells` columns each (one image: its
-    width and wb): each image's gradients, cells and borders are its own, and every cell sums
-    its pixels in the same order as for the image alone, so the same bits; the rows of all
-    the images run as one long row.
-    The colour channel is chosen for the whole image first (`strongest_gradients`), then row by
-    row in small vectorisable passes, branch-free where the data decide (random gradient
-    signs would defeat branch prediction); the scatter indexes the flat histogram with unsigned
-    indices (no negative-index wraparound code per access).
-    """
-    hb, wb = hist.shape[1], hist.shape[2]
-    rows = hb * cell
-    inv_cell2 = _ONE / np.float32(cell) / np.float32(cell)
-    unit = np.float32(_ACOS_STEPS)
-    zero = np.float32(0.0)
-    samples = wb // sample_cells
-    used = sample_cells * cell  # an image's columns that fill whole cells
-    cols = (samples - 1) * sample_width + used
-    x_first, x_frac = _bin_coordinates(used, cell)
-    y_first, y_frac = _bin_coordinates(rows, cell)
-    channels = planes.shape[0]
-    grey_row = np.empty((3, cols), np.float32)  # a grey row's gx, gy and squared
-    row_gx, row_gy, row_squared = grey_row[0], grey_row[1], grey_row[2]
-    image_gx, image_gy, image_squared = strongest_gradients(
-        planes, rows if channels > 1 else 0, cols, sample_width
-    )
-    table_index = np.empty(cols, np.uint32)
-    weight = np.empty(cols, np.float32)
-    orient = np.empty(cols, np.int64)
-    flat = hist.reshape(-1)
-    plane = hb * wb
-    for y in range(rows):
-        if channels == 1:  # no choice to make: the row's gradients, kept in cache
-            gx, gy, squared = row_gx, row_gy, row_squared
-            row_gradients(planes[0], y, gx, gy, sample_width)
-            for x in range(cols):
-                squared[x] = gx[x] * gx[x] + gy[x] * gy[x]
-        else:
-            gx, gy, squared = image_gx[y], image_gy[y], image_squared[y]
-        for x in range(cols):
-            magnitude = np.float32(math.sqrt(squared[x]))
-            inverse = min(_ONE / magnitude, _ZERO_GRADIENT_INVERSE)
-            negative = gy[x] < zero
-            # acos of the unit x-gradient, sign-flipped for negative y, via the toolbox's table;
-            # `bins` adds pi for negative y (its second half), mapping the angle to [0, 2 pi),
-            # and rounds it to a bin. (atan2 would differ at bin edges only.)
-            sign = _MINUS_ONE if negative else _ONE
-            index = np.int32(gx[x] * inverse * unit * sign) + _ACOS_OFFSET
-            table_index[x] = index + (2 * _ACOS_OFFSET if negative else 0)
-            weight[x] = magnitude * inv_cell2
-        for x in range(cols):
-            orient[x] = np.int64(bins[table_index[x]]) * plane
-        y0 = y_first[y]
-        yd = y_frac[y]
-        top = y0 * wb  # flat index of hist[0, y0, 0]
-        if samples == 1:
-            _scatter_row(flat, weight, orient, x_first, x_frac, 0, 0, wb, y0, yd, top, hb, wb, used)
-        else:  # image by image: the scatter is scalar code, and each image's cells its own
-            for sample in range(samples):
-                start, first_cell = sample * sample_width, sample * sample_cells
-                _scatter_row(
-                    flat,
-                    weight,
-                    orient,
-                    x_first,
-                    x_frac,
-                    start,
-                    first_cell,
-                    sample_cells,
-                    y0,
-                    yd,
-                    top,
-                    hb,
-                    wb,
-                    used,
-                )
-    # Border cells only receive 7/8 of an interior cell's weight (gradHist, softBin odd).
-    for o in range(n_bins):
-        for first in range(0, wb, sample_cells):
-            last = first + sample_cells - 1
-            for y in range(hb):
-                hist[o, y, first] *= _BORDER_GAIN
-            for x in range(first, last + 1):
-                hist[o, 0, x] *= _BORDER_GAIN
-            for y in range(hb):
-                hist[o, y, last] *= _BORDER_GAIN
-            for x in range(first, last + 1):
-                hist[o, hb - 1, x] *= _BORDER_GAIN
 
 
 @njit(cache=True, nogil=True, fastmath=False, error_model="numpy")
@@ -302,27 +134,66 @@ def _block_normalisers(insensitive, cell):
     return norm
 
 
+@njit(cache=True, nogil=True, fastmath=False, error_model="numpy")
+def _cell_factors(norm, factors, first):
+    """The four block normalisers of each cell of one image (`_block_normalisers`' grid) as
+    cell-aligned planes, into columns first.. of `factors` (4, hb, columns): hogChannels'
+    GETT(0), (1), (hb1), (hb1+1), the blocks at (y+1, x+1), (y, x+1), (y+1, x) and (y, x)."""
+    hb, wb = norm.shape[0] - 1, norm.shape[1] - 1
+    for y in range(hb):
+        for x in range(wb):
+            factors[0, y, first + x] = norm[y + 1, x + 1]
+            factors[1, y, first + x] = norm[y, x + 1]
+            factors[2, y, first + x] = norm[y + 1, x]
+            factors[3, y, first + x] = norm[y, x]
+
+
+@njit(cache=True, nogil=True, fastmath=False, error_model="numpy")
+def _normalised_channels(by_channel, n_orients, factors, clip, weights, out):
+    """hogChannels on the 2n sensitive and n insensitive bins of `by_channel` (3n, hb, cols),
+    each cell's four normalisers in `factors` (4, hb, cols): the mean of a cell's value under
+    them, each clipped, times `weights[y, x]`, into `out[o]`, and the 4 texture channels (the
+    clipped sensitive values times the texture weight, summed over the orientations in the
+    toolbox's order) into `out[3n:3n+4]`. Whole cell rows at a time, one channel after
+    another, with plain indexing (no views: a view per row costs reference counting); the
+    columns may be several images' cells side by side."""
+    n_bins = 2 * n_orients
+    hb, cols = by_channel.shape[1], by_channel.shape[2]
+    texture_first = 3 * n_orients
+    sums = np.empty((4, cols), np.float32)
+    for y in range(hb):
+        for k in range(4):
+            for x in range(cols):
+                sums[k, x] = 0.0
+        for o in range(n_bins + n_orients):
+            texture = o < n_bins
+            for x in range(cols):
+                r = by_channel[o, y, x]
+                t0 = min(r * factors[0, y, x], clip)
+                t1 = min(r * factors[1, y, x], clip)
+                t2 = min(r * factors[2, y, x], clip)
+                t3 = min(r * factors[3, y, x], clip)
+                out[o, y, x] = (t0 * _HALF + t1 * _HALF + t2 * _HALF + t3 * _HALF) * weights[y, x]
+                if texture:
+                    sums[0, x] += t0 * _TEXTURE_WEIGHT
+                    sums[1, x] += t1 * _TEXTURE_WEIGHT
+                    sums[2, x] += t2 * _TEXTURE_WEIGHT
+                    sums[3, x] += t3 * _TEXTURE_WEIGHT
+        for k in range(4):
+            for x in range(cols):
+                out[texture_first + k, y, x] = sums[k, x] * weights[y, x]
+
+
 @njit(cache=True, nogil=True, fastmath=False, error_model="numpy", inline="always")
-def _normalised_row(by_channel, o, norm, y, clip, weights, out, sums, texture):
-    """Cell row y of orientation channel o (hogChannels) of `by_channel` (channels, hb, wb): the
-    mean of each cell's value under its four block normalisers, each clipped, times `weights`,
-    into `out[o, y]`; with `texture`, the clipped values times the texture weight are added to
-    `sums` (4, cols). Inlined, with plain indexing and no array views: a call or a view per row
-    costs reference counting, which on the scale filter's 6 x 4-cell samples was most of the
-    time."""
-    for x in range(by_channel.shape[2]):
-        r = by_channel[o, y, x]
-        # The four blocks containing cell (y, x): hogChannels' GETT(0), (1), (hb1), (hb1+1).
-        t0 = min(r * norm[y + 1, x + 1], clip)
-        t1 = min(r * norm[y, x + 1], clip)
-        t2 = min(r * norm[y + 1, x], clip)
-        t3 = min(r * norm[y, x], clip)
-        out[o, y, x] = (t0 * _HALF + t1 * _HALF + t2 * _HALF + t3 * _HALF) * weights[y, x]
-        if texture:
-            sums[0, x] += t0 * _TEXTURE_WEIGHT
-            sums[1, x] += t1 * _TEXTURE_WEIGHT
-            sums[2, x] += t2 * _TEXTURE_WEIGHT
-            sums[3, x] += t3 * _TEXTURE_WEIGHT
+def _insensitive_sums(by_channel, n_orients):
+    """The n contrast-insensitive bins, the sums of opposite sensitive ones, into
+    `by_channel[2n:3n]`."""
+    for o in range(n_orients):
+        for y in range(by_channel.shape[1]):
+            for x in range(by_channel.shape[2]):
+                by_channel[2 * n_orients + o, y, x] = (
+                    by_channel[o, y, x] + by_channel[o + n_orients, y, x]
+                )
 
 
 @njit(cache=True, nogil=True, fastmath=False, error_model="numpy")
@@ -341,36 +212,11 @@ def _fhog_into(image, cell, n_orients, clip, bins, weights, out):
     # The 2n sensitive bins then the n insensitive ones, channel-major (one plane per bin).
     bins_by_channel = np.zeros((3 * n_orients, hb, wb), np.float32)
     planes = planar_float32(image)
-    _gradient_histogram(planes, cell, 2 * n_orients, bins, bins_by_channel, planes.shape[2], wb)
-    _normalised_cells(bins_by_channel, cell, n_orients, clip, weights, out)
-
-
-@njit(cache=True, nogil=True, fastmath=False, error_model="numpy", inline="always")
-def _normalised_cells(bins_by_channel, cell, n_orients, clip, weights, out):
-    """hogChannels on the 2n sensitive bins of `bins_by_channel` (3n, hb, wb; the n insensitive
-    ones are written here), times `weights`, into `out` as `_fhog_into` describes. The
-    normalisation runs along whole cell rows, one channel at a time, each texture sum still
-    taken over the orientations in the toolbox's order."""
-    n_bins = 2 * n_orients
-    hb, wb = out.shape[1], out.shape[2]
-    for o in range(n_orients):
-        for y in range(hb):
-            for x in range(wb):
-                bins_by_channel[n_bins + o, y, x] = (
-                    bins_by_channel[o, y, x] + bins_by_channel[o + n_orients, y, x]
-                )
-    norm = _block_normalisers(bins_by_channel[n_bins:], cell)
-    texture_first = 3 * n_orients
-    sums = np.empty((4, wb), np.float32)
-    for y in range(hb):
-        for k in range(4):
-            for x in range(wb):
-                sums[k, x] = 0.0
-        for o in range(n_bins + n_orients):
-            _normalised_row(bins_by_channel, o, norm, y, clip, weights, out, sums, o < n_bins)
-        for k in range(4):
-            for x in range(wb):
-                out[texture_first + k, y, x] = sums[k, x] * weights[y, x]
+    gradient_histogram(planes, cell, 2 * n_orients, bins, bins_by_channel, planes.shape[2], wb)
+    _insensitive_sums(bins_by_channel, n_orients)
+    factors = np.empty((4, hb, wb), np.float32)
+    _cell_factors(_block_normalisers(bins_by_channel[2 * n_orients :], cell), factors, 0)
+    _normalised_channels(bins_by_channel, n_orients, factors, clip, weights, out)
 
 
 @njit(cache=True, nogil=True, fastmath=False, error_model="numpy")
@@ -378,8 +224,10 @@ def _fhog_batch_into(images, cell, n_orients, clip, bins, sample_weights, out):
     """`_fhog_into` of each image into `out` (N, H//cell, W//cell, C), channel-last, all of
     image i's values times `sample_weights[i]` (channels `_fhog_into` leaves stay zero).
 
-    The images' histograms are taken side by side in one pass (`_gradient_histogram`), whose
-    rows then run N times as long: the scale filter's 22 x 22 samples gave rows of 20 pixels."""
+    The images are taken side by side, as one image N times as wide whose every image keeps
+    its own borders (`_gradient_histogram`), and normalised side by side too (each image's
+    block normalisers its own): the scale filter's 22 x 22 samples gave rows of 20 pixels and
+    5 cells."""
     count, rows, cols, channels = out.shape
     if count == 0 or rows == 0 or cols == 0:
         out[:] = 0.0
@@ -393,18 +241,22 @@ def _fhog_batch_into(images, cell, n_orients, clip, bins, sample_weights, out):
                 for x in range(width):
                     planes[c, y, i * width + x] = sample[c, y, x]
     side_by_side = np.zeros((3 * n_orients, rows, count * cols), np.float32)
-    _gradient_histogram(planes, cell, 2 * n_orients, bins, side_by_side, width, cols)
-    weights = np.empty((rows, cols), np.float32)
-    channel_first = np.zeros((channels, rows, cols), np.float32)
+    gradient_histogram(planes, cell, 2 * n_orients, bins, side_by_side, width, cols)
+    _insensitive_sums(side_by_side, n_orients)
+    factors = np.empty((4, rows, count * cols), np.float32)
+    weights = np.empty((rows, count * cols), np.float32)
     for i in range(count):
-        weights[:] = sample_weights[i]
-        own = np.ascontiguousarray(side_by_side[:, :, i * cols : (i + 1) * cols])
-        _normalised_cells(own, cell, n_orients, clip, weights, channel_first)
+        own = side_by_side[2 * n_orients :, :, i * cols : (i + 1) * cols]
+        _cell_factors(_block_normalisers(own, cell), factors, i * cols)
+        weights[:, i * cols : (i + 1) * cols] = sample_weights[i]
+    channel_first = np.zeros((channels, rows, count * cols), np.float32)
+    _normalised_channels(side_by_side, n_orients, factors, clip, weights, channel_first)
+    for i in range(count):
         target = out[i]
         for y in range(rows):
             for x in range(cols):
                 for c in range(channels):
-                    target[y, x, c] = channel_first[c, y, x]
+                    target[y, x, c] = channel_first[c, y, i * cols + x]
 
 
 def _as_kernel_input(images: np.ndarray, image_axes: int) -> np.ndarray:

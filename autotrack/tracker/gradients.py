@@ -1,17 +1,27 @@
-"""gradMag's per-pixel gradients, as Piotr Dollar's toolbox computes them for `fhog`.
+"""gradMag's per-pixel gradients and gradHist's histogram, as Piotr Dollar's toolbox computes
+them for `fhog`.
 
 `gradient2`'s centred differences (one-sided, factor 1, at the image border) on float32 planes,
-and the choice, per pixel, of the channel with the largest squared magnitude (a later channel
-only if strictly larger). `fhog` bins what these return.
+the choice, per pixel, of the channel with the largest squared magnitude (a later channel
+only if strictly larger), and the orientation histogram of the cells (`gradient_histogram`),
+which `fhog` normalises.
 """
 
 from __future__ import annotations
+
+import math
 
 import numpy as np
 from numba import njit
 
 _HALF = np.float32(0.5)
 _ONE = np.float32(1.0)
+_MINUS_ONE = np.float32(-1.0)
+_BORDER_GAIN = np.float32(8.0) / np.float32(7.0)
+_ZERO_GRADIENT_INVERSE = np.float32(1e10)  # min(rsqrt(0), 1e10) in gradMag
+ACOS_STEPS = 10000  # the toolbox's acosTable: a[i] ~= acos(i / 10000)
+ACOS_PAD = 10
+ACOS_OFFSET = ACOS_STEPS + ACOS_PAD
 
 
 @njit(cache=True, nogil=True, fastmath=False, error_model="numpy")
@@ -135,3 +145,171 @@ def strongest_gradients(planes, rows, cols, sample_width):
                 row_gx[x] = gx1[x]
                 row_gy[x] = gy1[x]
     return gx, gy, squared
+
+
+@njit(cache=True, nogil=True, fastmath=False, error_model="numpy")
+def _bin_coordinates(n_pixels, cell):
+    """Per pixel: left/top cell index (-1 before the first centre) and fractional offset.
+
+    Accumulates (i + 0.5) / cell - 0.5 in float32 exactly as gradHist does.
+    """
+    first = np.empty(n_pixels, np.int64)
+    frac = np.empty(n_pixels, np.float32)
+    step = _ONE / np.float32(cell)
+    position = _HALF * step - _HALF
+    for i in range(n_pixels):
+        index = -1 if i < cell // 2 else int(position)
+        first[i] = index
+        frac[i] = position - np.float32(index)
+        position += step
+    return first, frac
+
+
+@njit(cache=True, nogil=True, fastmath=False, error_model="numpy", inline="always")
+def _scatter_row(
+    flat,
+    weight,
+    orient,
+    x_first,
+    x_frac,
+    start,
+    first_cell,
+    sample_cells,
+    y0,
+    yd,
+    top,
+    hb,
+    wb,
+    used,
+):
+    """gradHist's bilinear vote in space of one image's `used` pixels of a row (from column
+    `start` of the row's `weight`, magnitude / cell^2, and `orient`, the bin's plane offset)
+    into the flat (bins, hb, wb) histogram, where the image's `sample_cells` cells of a row
+    start at column `first_cell`. Unsigned indices: no negative-index wraparound code."""
+    top = top + first_cell  # flat index of hist[0, y0, first_cell]
+    for within in range(used):
+        m = weight[start + within]
+        o = orient[start + within]
+        x0 = x_first[within]
+        xd = x_frac[within]
+        xyd = xd * yd
+        w00 = _ONE - xd - yd + xyd
+        w10 = yd - xyd
+        w01 = xd - xyd
+        w11 = xyd
+        has_left = x0 >= 0
+        has_right = x0 < sample_cells - 1
+        at = top + x0 + o  # hist[o, y0, x0] (o: the bin's plane offset); right cell: + 1
+        if y0 < 0:  # leading rows: only the cell row below the first centre line
+            if has_left:
+                flat[np.uint64(at + wb)] += w10 * m
+            if has_right:
+                flat[np.uint64(at + wb + 1)] += w11 * m
+        elif y0 < hb - 1:
+            if has_left:
+                flat[np.uint64(at)] += w00 * m
+                flat[np.uint64(at + wb)] += w10 * m
+            if has_right:
+                flat[np.uint64(at + 1)] += w01 * m
+                flat[np.uint64(at + wb + 1)] += w11 * m
+        else:  # final rows: no cell row below
+            if has_left:
+                flat[np.uint64(at)] += w00 * m
+            if has_right:
+                flat[np.uint64(at + 1)] += w01 * m
+
+
+@njit(cache=True, nogil=True, fastmath=False, error_model="numpy")
+def gradient_histogram(planes, cell, n_bins, bins, hist, sample_width, sample_cells):
+    """gradMag (full orientation) + gradHist(softBin=-1): bilinear in space, hard in angle.
+
+    `planes` is float32 (C, H, W), `bins` `orientation_bins(n_bins // 2)`, `hist` C-contiguous
+    (>= n_bins, hb, wb), channel-major: a pixel's right cell is the next float, not n_bins on.
+    `planes` may hold several images side by side, `sample_width` columns each, whose
+    histograms `hist` then holds side by side, `sample_cells` columns each (one image: its
+    width and wb): each image's gradients, cells and borders are its own, and every cell sums
+    its pixels in the same order as for the image alone, so the same bits; the rows of all
+    the images run as one long row.
+    The colour channel is chosen for the whole image first (`strongest_gradients`), then row by
+    row in small vectorisable passes, branch-free where the data decide (random gradient
+    signs would defeat branch prediction); the scatter indexes the flat histogram with unsigned
+    indices (no negative-index wraparound code per access).
+    """
+    hb, wb = hist.shape[1], hist.shape[2]
+    rows = hb * cell
+    inv_cell2 = _ONE / np.float32(cell) / np.float32(cell)
+    unit = np.float32(ACOS_STEPS)
+    zero = np.float32(0.0)
+    samples = wb // sample_cells
+    used = sample_cells * cell  # an image's columns that fill whole cells
+    cols = (samples - 1) * sample_width + used
+    x_first, x_frac = _bin_coordinates(used, cell)
+    y_first, y_frac = _bin_coordinates(rows, cell)
+    channels = planes.shape[0]
+    grey_row = np.empty((3, cols), np.float32)  # a grey row's gx, gy and squared
+    row_gx, row_gy, row_squared = grey_row[0], grey_row[1], grey_row[2]
+    image_gx, image_gy, image_squared = strongest_gradients(
+        planes, rows if channels > 1 else 0, cols, sample_width
+    )
+    table_index = np.empty(cols, np.uint32)
+    weight = np.empty(cols, np.float32)
+    orient = np.empty(cols, np.int64)
+    flat = hist.reshape(-1)
+    plane = hb * wb
+    for y in range(rows):
+        if channels == 1:  # no choice to make: the row's gradients, kept in cache
+            gx, gy, squared = row_gx, row_gy, row_squared
+            row_gradients(planes[0], y, gx, gy, sample_width)
+            for x in range(cols):
+                squared[x] = gx[x] * gx[x] + gy[x] * gy[x]
+        else:
+            gx, gy, squared = image_gx[y], image_gy[y], image_squared[y]
+        for x in range(cols):
+            magnitude = np.float32(math.sqrt(squared[x]))
+            inverse = min(_ONE / magnitude, _ZERO_GRADIENT_INVERSE)
+            negative = gy[x] < zero
+            # acos of the unit x-gradient, sign-flipped for negative y, via the toolbox's table;
+            # `bins` adds pi for negative y (its second half), mapping the angle to [0, 2 pi),
+            # and rounds it to a bin. (atan2 would differ at bin edges only.)
+            sign = _MINUS_ONE if negative else _ONE
+            index = np.int32(gx[x] * inverse * unit * sign) + ACOS_OFFSET
+            table_index[x] = index + (2 * ACOS_OFFSET if negative else 0)
+            weight[x] = magnitude * inv_cell2
+        for x in range(cols):
+            orient[x] = np.int64(bins[table_index[x]]) * plane
+        y0 = y_first[y]
+        yd = y_frac[y]
+        top = y0 * wb  # flat index of hist[0, y0, 0]
+        if samples == 1:
+            _scatter_row(flat, weight, orient, x_first, x_frac, 0, 0, wb, y0, yd, top, hb, wb, used)
+        else:  # image by image: the scatter is scalar code, and each image's cells its own
+            for sample in range(samples):
+                start, first_cell = sample * sample_width, sample * sample_cells
+                _scatter_row(
+                    flat,
+                    weight,
+                    orient,
+                    x_first,
+                    x_frac,
+                    start,
+                    first_cell,
+                    sample_cells,
+                    y0,
+                    yd,
+                    top,
+                    hb,
+                    wb,
+                    used,
+                )
+    # Border cells only receive 7/8 of an interior cell's weight (gradHist, softBin odd).
+    for o in range(n_bins):
+        for first in range(0, wb, sample_cells):
+            last = first + sample_cells - 1
+            for y in range(hb):
+                hist[o, y, first] *= _BORDER_GAIN
+            for x in range(first, last + 1):
+                hist[o, 0, x] *= _BORDER_GAIN
+            for y in range(hb):
+                hist[o, y, last] *= _BORDER_GAIN
+            for x in range(first, last + 1):
+                hist[o, hb - 1, x] *= _BORDER_GAIN
