@@ -263,7 +263,7 @@ class AdmmWorkspace:
     """Buffers of one tracker's ADMM training, reused frame after frame (a tracker trains on one
     thread at a time): all-zero spectra standing for the first iteration's h and multiplier
     (never written), two multiplier buffers (each update reads one and writes the other), the
-    per-frequency sum_k |x_k|^2 and the h-step's gain."""
+    per-frequency sums sum_k |x_k|^2 and sum_k conj(x_k) g_prev_k, and the h-step's gain."""
 
     def __init__(self, spectrum_shape: tuple[int, int, int], grid_size: tuple[int, int]) -> None:
         self.zeros = np.zeros(spectrum_shape, np.complex64)
@@ -272,4 +272,5 @@ class AdmmWorkspace:
             np.empty(spectrum_shape, np.complex64),
         )
         self.s_xx = np.empty(spectrum_shape[1:], np.float32)
+        self.s_gx = np.empty(spectrum_shape[1:], np.complex64)
         self.gain = np.empty(grid_size, np.float32)

@@ -288,13 +288,13 @@ def train_filter(
     (eq. 13); it returns None to keep theta unchanged.
 
     Each g-step also takes the previous multiplier update (eq. 14) and writes the h-step's input
-    (`solve_g_step`'s keyword arguments); the multiplier alternates between two buffers (no in-place kernel call).
+    (`solve_g_step`'s keyword arguments); the multiplier alternates between two buffers (no
+    in-place kernel call).
     """
     num_cells = transform.grid_size[0] * transform.grid_size[1]
     work = transform.workspace()
     g_f = h_f = l_f = work.zeros  # h and the multiplier start at 0; g is set first
-    s_xx = work.s_xx
-    s_gx_prev = np.empty(s_xx.shape, np.complex64)
+    s_xx, s_gx_prev = work.s_xx, work.s_gx
     admm_kernels.training_sums(
         _by_channel(xf), _by_channel(g_prev), s_xx.reshape(-1), s_gx_prev.reshape(-1)
     )

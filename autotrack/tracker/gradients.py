@@ -280,7 +280,7 @@ def gradient_histogram(planes, cell, n_bins, bins, hist, sample_width, sample_ce
         y0 = y_first[y]
         yd = y_frac[y]
         top = y0 * wb  # flat index of hist[0, y0, 0]
-        if samples == 1:
+        if samples == 1:  # its own call: inside the loop below, one image runs ~6% slower
             _scatter_row(flat, weight, orient, x_first, x_frac, 0, 0, wb, y0, yd, top, hb, wb, used)
         else:  # image by image: the scatter is scalar code, and each image's cells its own
             for sample in range(samples):
