@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import io
 import json
+import threading
 import time
 import zipfile
 from collections.abc import Iterator
@@ -52,7 +53,15 @@ SHUFFLED = ("C", "A", "D", "B")
 """The order the test draws the demo's landmarks in (not the scene's)."""
 
 
-def _wait_for(predicate, timeout: float = 60.0, what: str = "condition", tab=None) -> None:
+WAIT_S = 300.0
+"""How long a test waits for a state before it fails. The waits are for states (a frame
+tracked, a chart holding a frame), never for a rate, so a busy machine only makes them slower:
+the deadline is generous and costs nothing when the state comes."""
+PAGE_TIMEOUT_MS = 120_000
+"""Playwright's deadline for one action (a click, a screenshot of the WebGL canvas)."""
+
+
+def _wait_for(predicate, timeout: float = WAIT_S, what: str = "condition", tab=None) -> None:
     deadline = time.monotonic() + timeout
     while not predicate():
         if time.monotonic() > deadline:
@@ -95,11 +104,12 @@ def studio_page(server, profile: Path, **options) -> Iterator[tuple[object, obje
             **options,
         )
         try:
+            browser.set_default_timeout(PAGE_TIMEOUT_MS)
             page = browser.new_page()
             page.goto(server.url)
             _wait_for(lambda: len(server.tabs) == 1, what="the tab to connect")
             tab = next(iter(server.tabs.values()))
-            assert tab.wait_idle()
+            assert tab.wait_idle(WAIT_S)
             yield page, tab
         finally:
             browser.close()
@@ -152,7 +162,7 @@ def test_draw_play_inspect_and_download_in_chromium(studio, tmp_path: Path) -> N
             _wait_for(
                 lambda n=count: len(controller.run.targets) == n, what=f"box {count}", tab=tab
             )
-        assert tab.wait_idle()
+        assert tab.wait_idle(WAIT_S)
         run = controller.run
         assert controller.cursor == 0  # all four drawn on frame 1
         # Tied by the correspondence search, whatever the drawing order.
@@ -172,7 +182,7 @@ def test_draw_play_inspect_and_download_in_chromium(studio, tmp_path: Path) -> N
         _wait_for(lambda: controller.cursor >= PLAY_FRAMES, what=f"{PLAY_FRAMES} frames", tab=tab)
         finished, end_frame = time.monotonic(), controller.cursor
         page.get_by_role("button", name="Pause").click()
-        assert tab.wait_idle()
+        assert tab.wait_idle(WAIT_S)
         last = controller.cursor
         assert last >= PLAY_FRAMES and run.tracked_until == last
         for target in run.targets.values():
@@ -232,7 +242,7 @@ def test_draw_play_inspect_and_download_in_chromium(studio, tmp_path: Path) -> N
             "Download poses (TUM)",
             "Download session (MCAP)",
         ):
-            with page.expect_download(timeout=30_000) as download_info:
+            with page.expect_download(timeout=PAGE_TIMEOUT_MS) as download_info:
                 page.get_by_role("button", name=label).click()
             download = download_info.value
             target = tmp_path / download.suggested_filename
@@ -338,13 +348,18 @@ def _text_input(page, label: str):
     return page.locator(f"xpath=//*[normalize-space(text())='{label}']/following::input[1]")
 
 
+HOVER_FRAMES = 150
+"""Frames the live test's video hovers on the demo's first frame (boxes.json is drawn there):
+15 s of preview in real time to freeze one of them."""
+
+
 def _hovering_flight_video(path: Path, fps: float = 10.0) -> Path:
-    """The demo as a video played live: 15 s hovering on its first frame (time to freeze and
-    place the boxes.json boxes, drawn for that frame), then the flight out and back, twice."""
+    """The demo as a video played live: HOVER_FRAMES on its first frame (where the boxes.json
+    boxes are drawn), then the flight out and back."""
     from autotrack.io.frames import open_frames
 
     source = open_frames(DEMO / "img")
-    order = [0] * 150 + (list(range(len(source))) + list(range(len(source) - 1, -1, -1))) * 2
+    order = [0] * HOVER_FRAMES + list(range(len(source))) + list(range(len(source) - 1, -1, -1))
     writer = cv2.VideoWriter(str(path), cv2.VideoWriter_fourcc(*"MJPG"), fps, source.frame_size)
     for index in order:
         writer.write(source.read_bgr(index))
@@ -353,17 +368,63 @@ def _hovering_flight_video(path: Path, fps: float = 10.0) -> Path:
     return path
 
 
+class SourcePace:
+    """The live source's clock, moved by the test: a paced video's next frame is due after its
+    interval in real time (a hovering camera, while the page previews it), or only when the
+    rule given to `let_through` lets it through (the rule sees how many frames were delivered
+    after the first). So the test controls the rate, and no wait depends on the machine's speed.
+    """
+
+    def __init__(self) -> None:
+        self._now = 0.0
+        self._delivered = 0
+        self._rule = None
+        self._closed = threading.Event()
+
+    def let_through(self, rule) -> None:
+        self._rule = rule
+
+    def clock(self) -> float:
+        return self._now
+
+    def sleep(self, seconds: float) -> None:
+        if self._rule is None:
+            self._closed.wait(seconds)
+        while not (self._closed.is_set() or self._rule is None or self._rule(self._delivered)):
+            self._closed.wait(0.01)
+        self._delivered += 1
+        self._now += seconds
+
+    def close(self) -> None:
+        """From now on every frame is due at once (the source is being closed)."""
+        self._closed.set()
+
+
 @pytest.fixture
-def live_studio(tmp_path: Path):
+def live_studio(tmp_path: Path, monkeypatch):
+    """A studio that may open live sources, and the pace the test plays its video at."""
     if not CHROMIUM.exists():
         pytest.skip("/usr/bin/chromium is not installed (apt-get install chromium)")
     pytest.importorskip("playwright.sync_api")
+    import app.live
     from app.config import AppConfig
     from app.server import StudioServer
+    from autotrack.io.live import LiveReader
 
     media = tmp_path / "media"
     media.mkdir()
     _hovering_flight_video(media / "flight.avi")
+    pace = SourcePace()
+
+    class PacedReader(LiveReader):
+        def __init__(self, source, **options) -> None:
+            super().__init__(source, clock=pace.clock, sleep=pace.sleep, **options)
+
+        def close(self) -> None:
+            pace.close()  # a source held by the test lets its thread see the stop
+            super().close()
+
+    monkeypatch.setattr(app.live, "LiveReader", PacedReader)
     config = AppConfig(
         port=0,
         sessions_dir=tmp_path / "sessions",
@@ -373,8 +434,9 @@ def live_studio(tmp_path: Path):
         allow_live=True,
     )
     server = StudioServer(config)
-    server.warm_up.join(timeout=120)
-    yield server
+    server.warm_up.join(timeout=WAIT_S)
+    yield server, pace
+    pace.close()
     server.stop()
 
 
@@ -383,8 +445,9 @@ def test_a_live_source_is_tracked_in_chromium(live_studio, tmp_path: Path) -> No
     from app.live import FROZEN, OFF, PREVIEW, TRACKING
     from autotrack.sessions import open_session
 
+    server, pace = live_studio
     ARTIFACTS.mkdir(exist_ok=True)
-    with studio_page(live_studio, tmp_path / "profile") as (page, tab):
+    with studio_page(server, tmp_path / "profile") as (page, tab):
         live, controller, stats = tab.live, tab.controller, tab.display.stats
         _text_input(page, "Source").fill("flight.avi")
         _text_input(page, "Live scene file").fill(str(DEMO / "scene.json"))
@@ -397,20 +460,26 @@ def test_a_live_source_is_tracked_in_chromium(live_studio, tmp_path: Path) -> No
         _wait_for(lambda: stats.video_targets[0] > 5, what="the preview frames", tab=tab)
         page.get_by_role("button", name="Freeze frame").click()
         _wait_for(lambda: live.state == FROZEN, what="the frozen frame", tab=tab)
+        pace.let_through(lambda delivered: False)  # the source holds while boxes are placed
         page.get_by_role("button", name="Load boxes.json").click()
         _wait_for(lambda: len(controller.run.targets) == 4, what="the four boxes", tab=tab)
         frozen = controller.cursor
         page.screenshot(path=str(ARTIFACTS / "app-live-frozen-boxes.png"))
+        # Tracking: the next frame is due once the tracker has taken the newest one (at any
+        # machine speed), so every frame the test waits for comes.
+        pace.let_through(lambda delivered: controller.cursor >= delivered)
         page.get_by_role("button", name="Start tracking").click()
         _wait_for(lambda: live.state == TRACKING, what="tracking", tab=tab)
         boxes_json = page.get_by_role("button", name="Load boxes.json (Stop first)")
         _wait_for(lambda: boxes_json.count() == 1, what="Load boxes.json greyed while live")
         assert boxes_json.is_disabled()
         # Past the hover and into the flight, the page gets the tracked boxes.
-        _wait_for(lambda: controller.cursor > 170, timeout=90, what="the flight", tab=tab)
+        into_flight = HOVER_FRAMES + 20
+        _wait_for(lambda: controller.cursor > into_flight, what="the flight", tab=tab)
         _wait_for(
             lambda: (
-                stats.video_targets[0] > 170 and stats.video_targets[1] == ("T1", "T2", "T3", "T4")
+                stats.video_targets[0] > into_flight
+                and stats.video_targets[1] == ("T1", "T2", "T3", "T4")
             ),
             what="a live frame with its four tracked boxes sent to the page",
             tab=tab,
@@ -423,7 +492,7 @@ def test_a_live_source_is_tracked_in_chromium(live_studio, tmp_path: Path) -> No
         _wait_for(  # the four signal charts follow the live frames
             lambda: (
                 len(page.evaluate(CHARTS_JS)) == 4
-                and min(row["frames"] for row in page.evaluate(CHARTS_JS)) > 170
+                and min(row["frames"] for row in page.evaluate(CHARTS_JS)) > 10
             ),
             what="the charts with the live frames",
             tab=tab,
@@ -440,7 +509,7 @@ def test_a_live_source_is_tracked_in_chromium(live_studio, tmp_path: Path) -> No
         assert figures.processed > 10 and figures.captured >= figures.processed
         page.get_by_role("button", name="Stop", exact=True).click()
         _wait_for(lambda: live.state == OFF, what="the stop", tab=tab)
-        assert tab.wait_idle()
+        assert tab.wait_idle(WAIT_S)
         assert "recorded to" in controller.message
         page.screenshot(path=str(ARTIFACTS / "app-live-stopped.png"))
         session = open_session(
