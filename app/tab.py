@@ -385,7 +385,7 @@ class Tab:
         if any(pose.valid for pose in run.poses.values()):
             self._aim_camera()
 
-    def wait_idle(self, timeout: float = 60.0) -> bool:
+    def wait_idle(self, timeout: float = 300.0) -> bool:
         """Block until every queued command ran and playback stopped; False on timeout."""
         return self.worker.wait_idle(timeout)
 

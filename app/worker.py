@@ -68,7 +68,7 @@ class Worker:
         """Whether a command is queued (long commands stop early to let it run)."""
         return not self._commands.empty()
 
-    def wait_idle(self, timeout: float = 60.0) -> bool:
+    def wait_idle(self, timeout: float = 300.0) -> bool:
         """Block until every queued command ran and playback stopped; False on timeout."""
         deadline = time.monotonic() + timeout
         with self._idle:

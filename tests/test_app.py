@@ -433,7 +433,7 @@ def _open_tab(
     return tab, channel
 
 
-def _wait_for(predicate, timeout: float = 30.0) -> None:
+def _wait_for(predicate, timeout: float = 120.0) -> None:
     deadline = time.monotonic() + timeout
     while not predicate():
         assert time.monotonic() < deadline, "condition not reached"
@@ -1226,8 +1226,8 @@ def test_load_boxes_json_follows_the_open_source(studio, tmp_path: Path) -> None
     _demo_video(media)
     tab.live = LiveControl(tab.controller, allowed=True)  # as --allow-live gives it
     tab.worker.submit(tab.live.open_source, "sessions/media/flight.avi")
-    _wait_for(lambda: tab.live.state == "preview", timeout=10)
-    _wait_for(lambda: not boxes_json.visible, timeout=5)  # not the demo's any more
+    _wait_for(lambda: tab.live.state == "preview", timeout=120)
+    _wait_for(lambda: not boxes_json.visible, timeout=120)  # not the demo's any more
     assert tab.live.state == "preview" and tab.controller.boxes_path is None
     tab.worker.submit(tab.live.stop)
     assert tab.wait_idle()
@@ -1268,7 +1268,7 @@ def test_show_ground_truth_redraws_the_canvas_at_once(tmp_path: Path) -> None:
         time.sleep(0.5)  # nothing else to draw
         drawn = stats.canvas_frames
         _set(tab.panels.targets.show_truth, True)  # no command runs: only the checkbox
-        _wait_for(lambda: stats.canvas_frames > drawn, timeout=5.0)
+        _wait_for(lambda: stats.canvas_frames > drawn, timeout=120)
         assert not [note for note, error in channel.notes if error]
     finally:
         studio.stop()

@@ -588,7 +588,7 @@ def test_worker_runs_commands_in_order_then_plays_until_stopped() -> None:
         for number in range(3):
             worker.submit(order.append, number)
         worker.submit(setattr, playback, "playing", True)
-        assert worker.wait_idle(timeout=30.0)
+        assert worker.wait_idle(timeout=120.0)
         assert order == [0, 1, 2] and playback.steps == 5 and playback.after_commands == 4
     finally:
         worker.close()
@@ -605,11 +605,11 @@ def test_worker_reports_errors_stops_playing_and_keeps_running() -> None:
         for error in (InputError("typed badly"), KeyError("bug")):
             worker.submit(setattr, playback, "playing", True)
             worker.submit(fail, error)
-            assert worker.wait_idle(timeout=10.0)  # playback stopped
+            assert worker.wait_idle(timeout=120.0)  # playback stopped
             assert not playback.playing
         assert playback.reports == ["typed badly", "internal error: KeyError: 'bug'"]
         worker.submit(setattr, playback, "steps", -1)
-        assert worker.wait_idle(timeout=30.0) and playback.steps == -1  # still alive
+        assert worker.wait_idle(timeout=120.0) and playback.steps == -1  # still alive
     finally:
         worker.close()
 

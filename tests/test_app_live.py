@@ -83,7 +83,7 @@ def test_a_video_played_live_is_tracked_on_its_newest_frames_recorded_and_reopen
 
     def slow_advance(frame_index: int) -> None:
         """A tracker that finishes a frame only once two newer ones were captured."""
-        reader.wait_until_captured(frame_index + 3, timeout=5.0)
+        reader.wait_until_captured(frame_index + 3, timeout=60.0)
         track_next(frame_index)
 
     run.advance = slow_advance
