@@ -38,7 +38,7 @@ RELEASING = (
     "shifted_spectrum",
     "scaled_sum",
     "apply_gain",
-    "pypocketfft",
+    "pypocketfft",  # scipy.fft's transforms
     "c_einsum",
 )
 """Names of the calls that release the GIL (substrings of cProfile's function names)."""

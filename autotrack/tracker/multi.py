@@ -2,7 +2,7 @@
 
 Each target has its own AutoTrack (its own filter, scale filter and regularisation state); the
 frame is decoded and checked once and handed to every tracker, optionally on a thread pool
-(numpy, pocketfft, FFTW, OpenCV and numba release the GIL in the heavy parts) and optionally shared
+(numpy, scipy.fft, OpenCV and numba release the GIL in the heavy parts) and optionally shared
 with child processes (`processes` > 1: the targets are spread over this process and
 `processes - 1` children, `target_process`, which gives true parallelism where threads
 serialise on the GIL). Every result carries the multi-tracker's frame index, so a target added

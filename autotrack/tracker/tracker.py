@@ -18,12 +18,10 @@ from autotrack.params import TrackerParams
 from autotrack.result import TrackResult
 from autotrack.tracker import dcf, memory, motion, redetect, regularization, robust, rotation
 from autotrack.tracker.aspect import AspectFilter
-from autotrack.tracker.features import feature_dim, feature_maps, is_grey, load_colour_table
+from autotrack.tracker.backend import make_backend
+from autotrack.tracker.features import feature_dim, is_grey, load_colour_table
 from autotrack.tracker.inputs import as_image, validate_box
-from autotrack.tracker.kernel_loading import load_package_without_refresh
 from autotrack.tracker.scale import ScaleFilter
-
-load_package_without_refresh()  # every kernel module is imported by now
 
 __all__ = ["AutoTrack", "CvAutoTrack", "validate_box"]
 
@@ -44,13 +42,6 @@ class AutoTrack:
                 raise InputError("colour_feature='table' needs colour_table_path (a .npy or .mat)")
             colour_table = load_colour_table(self.params.colour_table_path)
         self.colour_table = colour_table
-        self.admm = dcf.AdmmSettings(
-            iterations=self.params.admm_iterations,
-            lambda_spatial=self.params.admm_lambda,
-            gamma_init=self.params.gamma_init,
-            gamma_step=self.params.gamma_step,
-            gamma_max=self.params.gamma_max,
-        )
         self.frame_number = 0
         self.last_result: TrackResult | None = None
 
@@ -104,15 +95,20 @@ class AutoTrack:
         )
         self.region = regularization.target_region(self.grid_size, self.region_size)
         self.spatial_window = self.base_window
+        channels = feature_dim(p, colour=not self.grey)
+        self.backend = make_backend(p, self.colour_table, channels, self.grid_size)
         self.scale_filter = ScaleFilter(
-            p, target_size, self.base_target_size, self.window_size, self.image_size_hw
+            p,
+            target_size,
+            self.base_target_size,
+            self.window_size,
+            self.image_size_hw,
+            self.backend,
         )
 
         self.frame_number = 1
         self.angle, self.last_peak, self.turning = 0.0, math.inf, False  # rotation.py's state
         search_box = self._search_box()
-        channels = feature_dim(p, colour=not self.grey)
-        self.transform = dcf.SpectrumTransform(channels, self.grid_size)
         xf = self._features_spectrum(image)
         self.filter_f = np.zeros_like(xf)
         self.filter_f, theta = self._train(xf, theta_start=0.0, theta_ref=0.0)
@@ -311,8 +307,7 @@ class AutoTrack:
             self.filter_f,
             self.grid_size,
             self.cos_window,
-            p,
-            self.colour_table,
+            self.backend,
         )
         if np.max(np.abs(offset)) < p.cell_size * self.scale:
             return None  # the best placement is the current one
@@ -321,8 +316,8 @@ class AutoTrack:
         candidate = self.position + dcf.matlab_round(offset)
         self.position = np.clip(candidate, 1.0, [float(height), float(width)])
         zf = self._features_spectrum(image)
-        response = dcf.detection_response(self.filter_f, zf, self.grid_size)
-        peak = dcf.newton_peak(response, p.newton_iterations)
+        response = self.backend.response(self.filter_f, zf)
+        peak = self.backend.peak(response, p.newton_iterations)
         # Move only to a confident place that beats the local peak by as much as the gate
         # discounts a usual peak: a look-alike no better than the target does not win.
         dominant = peak[2] * p.confidence_gate > local_peak
@@ -353,9 +348,9 @@ class AutoTrack:
 
     def _detect_patch(self, patch: np.ndarray):
         """(features spectrum, response, (row, col, peak)) of one search patch (eq. 16)."""
-        zf = self._spectrum(patch)
-        response = dcf.detection_response(self.filter_f, zf, self.grid_size)
-        return zf, response, dcf.newton_peak(response, self.params.newton_iterations)
+        zf = self.backend.feature_spectrum(patch, self.cos_window)
+        response = self.backend.response(self.filter_f, zf)
+        return zf, response, self.backend.peak(response, self.params.newton_iterations)
 
     def _upright(self, image: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(image, position) for the scale filter: the frame itself, or with the target turned,
@@ -372,7 +367,10 @@ class AutoTrack:
         """This frame's search region at the current position and scale, at any angle."""
         rows, cols = self._search_region()
         output = (int(self.window_size[0]), int(self.window_size[1]))
-        return rotation.TurnedSampler(image, self.position, (int(rows), int(cols)), output)
+        region = (int(rows), int(cols))
+        return rotation.TurnedSampler(
+            image, self.position, region, output, self.backend.search_patch
+        )
 
     def _search_region(self) -> tuple[float, float]:
         """matlab_round(window_size * scale) as (rows, cols) floats, recomputed only when the
@@ -383,14 +381,9 @@ class AutoTrack:
             self._region, self._region_key = (float(rows), float(cols)), key
         return self._region
 
-    def _spectrum(self, patch: np.ndarray) -> np.ndarray:
-        """The windowed feature spectrum of a search patch."""
-        maps = self.transform.input_maps
-        feature_maps(patch, self.params, self.colour_table, self.cos_window, out=maps)
-        return self.transform.forward(maps)
-
     def _features_spectrum(self, image: np.ndarray) -> np.ndarray:
-        return self._spectrum(self._sampler(image).patch(self.angle))
+        patch = self._sampler(image).patch(self.angle)
+        return self.backend.feature_spectrum(patch, self.cos_window)
 
     def _theta_update(
         self, theta_ref: float, filter_prev: np.ndarray
@@ -408,15 +401,8 @@ class AutoTrack:
     ) -> tuple[np.ndarray, float]:
         """Filter for this frame by ADMM (eqs. 8-15), warm-started from the previous one."""
         update = self._theta_update(theta_ref, self.filter_f)
-        return dcf.train_filter(
-            xf,
-            self.label_f,
-            self.filter_f,
-            self.spatial_window,
-            theta_start,
-            self.admm,
-            self.transform,
-            update,
+        return self.backend.train(
+            xf, self.label_f, self.filter_f, self.spatial_window, theta_start, update
         )
 
     def _predicted_position(self) -> np.ndarray:
@@ -433,7 +419,8 @@ class AutoTrack:
             return None
         self.aspect_filter = None  # _box_size_hw: the first frame's shape
         settings = (p.scale_step, p.scale_sigma_factor, p.scale_lambda, p.scale_learning_rate)
-        aspect = AspectFilter(p.num_aspects, *settings, self.scale_filter.model_size_hw)
+        model_size = self.scale_filter.model_size_hw
+        aspect = AspectFilter(p.num_aspects, *settings, model_size, self.backend)
         aspect.update(image, self.position, self._box_size_hw())
         return aspect
 
