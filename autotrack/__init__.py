@@ -21,7 +21,7 @@ from autotrack.result import PoseEstimate, TrackResult
 _LAZY = {
     "AutoTrack": "autotrack.tracker.tracker",
     "CvAutoTrack": "autotrack.tracker.tracker",
-    "MultiTracker": "autotrack.tracker.multi",
+    "MultiTracker": "autotrack.tracker.parallel.multi",
     "Localizer": "autotrack.localization.localizer",
     "LocalizerParams": "autotrack.localization.localizer",
     "Scene": "autotrack.localization.scene",

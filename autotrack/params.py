@@ -98,7 +98,7 @@ class TrackerParams:
     scale_model_max_area: float = 32.0 * 16.0
     """Largest area (pixels^2) of a resampled scale sample."""
 
-    # Beyond the release (the `autotrack+` preset, autotrack/tracker/robust.py and redetect.py); every
+    # Beyond the release (the `autotrack+` preset, autotrack/tracker/plus/robust.py and redetect.py); every
     # switch is off in the faithful presets, which then run the release's code path unchanged.
     robust_variation: bool = False
     """Local variation with its denominator floored at `variation_floor` x the previous peak

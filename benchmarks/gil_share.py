@@ -65,7 +65,7 @@ def main() -> None:
 
     from autotrack.io.frames import open_frames
     from autotrack.params import preset
-    from autotrack.tracker.multi import MultiTracker
+    from autotrack.tracker.parallel.multi import MultiTracker
 
     cv2.setNumThreads(1)
     with tempfile.TemporaryDirectory() as folder:

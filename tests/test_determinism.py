@@ -11,7 +11,7 @@ from pathlib import Path
 import pytest
 
 from autotrack.params import preset
-from autotrack.tracker.multi import MultiTracker
+from autotrack.tracker.parallel.multi import MultiTracker
 from tests import test_multi
 from tests.conftest import needs_sequences, shared_sequence_dir
 from tests.test_target_process import assert_identical

@@ -13,8 +13,9 @@ from autotrack.evaluation.benchmark import run_task
 from autotrack.evaluation.datasets import load_sequences
 from autotrack.evaluation.metrics import center_errors, overlaps, score_sequence, summarize
 from autotrack.params import PRESETS
-from autotrack.tracker import dcf, redetect, regularization, robust
+from autotrack.tracker import dcf, regularization
 from autotrack.tracker.backend import ReferenceBackend
+from autotrack.tracker.plus import redetect, robust
 from autotrack.tracker.scale import ScaleFilter
 from tests.conftest import SEQUENCES, needs_sequences
 from tests.sequences import moving_target_sequence

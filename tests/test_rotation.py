@@ -11,7 +11,7 @@ import pytest
 
 from autotrack.errors import InputError
 from autotrack.params import PRESETS, TrackerParams
-from autotrack.tracker import rotation
+from autotrack.tracker.plus import rotation
 from autotrack.tracker.sampling import search_patch
 from autotrack.tracker.tracker import AutoTrack
 from tests.sequences import spinning_target_sequence

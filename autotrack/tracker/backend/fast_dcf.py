@@ -18,6 +18,7 @@ from numba import njit
 
 from autotrack.tracker.backend import admm_kernels
 from autotrack.tracker.dcf import (
+    GRID_AXES,
     AdmmSettings,
     centred_frequencies,
     from_spectrum,
@@ -63,7 +64,10 @@ class SpectrumTransform:
 
     def project_input(self, gain: np.ndarray) -> np.ndarray:
         """F(gain * F^-1(`h_step_input`)), in a buffer the next projection overwrites."""
-        maps = from_spectrum(self.h_step_input, self.grid_size)
+        # The input is rewritten by the next g-step: pocketfft may work in it (no copy).
+        maps = scipy.fft.irfft2(
+            self.h_step_input, s=self.grid_size, axes=GRID_AXES, workers=1, overwrite_x=True
+        )
         maps *= gain
         return to_spectrum(maps)
 

@@ -183,9 +183,7 @@ class TargetProcess:
         self._pending += 1
 
 
-_CHILD_MAIN = (
-    "import sys; from autotrack.tracker.target_process import serve; serve(int(sys.argv[1]))"
-)
+_CHILD_MAIN = "import sys; from autotrack.tracker.parallel.target_process import serve; serve(int(sys.argv[1]))"
 
 
 def serve(descriptor: int) -> None:

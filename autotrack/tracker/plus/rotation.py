@@ -17,7 +17,7 @@ import math
 import cv2
 import numpy as np
 
-from autotrack.tracker.robust import apce
+from autotrack.tracker.plus.robust import apce
 from autotrack.tracker.sampling import search_patch
 
 

@@ -33,8 +33,8 @@ import numpy as np
 from autotrack.errors import InputError
 from autotrack.params import TrackerParams
 from autotrack.result import TrackResult
-from autotrack.tracker.speculation import Speculation
-from autotrack.tracker.target_process import SharedFrame, TargetProcess, WorkerPool
+from autotrack.tracker.parallel.speculation import Speculation
+from autotrack.tracker.parallel.target_process import SharedFrame, TargetProcess, WorkerPool
 from autotrack.tracker.tracker import AutoTrack
 
 Box = Sequence[float]
