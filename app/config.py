@@ -58,7 +58,7 @@ class AppConfig:
         """(threads, processes) of each run's trackers: as chosen, else the library's default
         for `max_targets` targets (one thread and two processes on two cores or more; a child
         process starts only when a second target is drawn)."""
-        from autotrack.tracker.multi import chosen_concurrency
+        from autotrack.tracker.parallel.multi import chosen_concurrency
 
         return chosen_concurrency(self.tracker_threads, self.tracker_processes, self.max_targets)
 

@@ -20,8 +20,8 @@ from app.owners import BrowserSpace, browser_tag
 from app.recordings import RecordingRegistry
 from app.tab import Tab
 from app.uploads import UploadReceiver
-from autotrack.tracker.target_process import WorkerPool
-from autotrack.tracker.warmup import warm_up
+from autotrack.tracker.parallel.target_process import WorkerPool
+from autotrack.tracker.parallel.warmup import warm_up
 
 
 class StudioServer:

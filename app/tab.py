@@ -42,7 +42,7 @@ from app.recordings import RecordingRegistry
 from app.view3d import DEFAULT_FOV
 from app.worker import Worker
 from autotrack.errors import InputError
-from autotrack.tracker.target_process import WorkerPool
+from autotrack.tracker.parallel.target_process import WorkerPool
 
 TABLE_PERIOD = 0.25
 """Seconds between Targets-table updates while frames change (playing, tracking ahead)."""

@@ -12,7 +12,6 @@ described in docs/architecture.md.
 from importlib import import_module
 from importlib.metadata import PackageNotFoundError, version
 
-from autotrack.compile_cache import configure_numba_cache
 from autotrack.errors import AutoTrackError, BoxError, InputError, SceneError, SessionError
 from autotrack.params import PRESETS, TrackerParams, preset
 from autotrack.result import PoseEstimate, TrackResult
@@ -22,7 +21,7 @@ from autotrack.result import PoseEstimate, TrackResult
 _LAZY = {
     "AutoTrack": "autotrack.tracker.tracker",
     "CvAutoTrack": "autotrack.tracker.tracker",
-    "MultiTracker": "autotrack.tracker.multi",
+    "MultiTracker": "autotrack.tracker.parallel.multi",
     "Localizer": "autotrack.localization.localizer",
     "LocalizerParams": "autotrack.localization.localizer",
     "Scene": "autotrack.localization.scene",
@@ -34,8 +33,6 @@ _LAZY = {
     "localize_sequence": "autotrack.pipeline.localize",
     "open_frames": "autotrack.io.frames",
 }
-
-configure_numba_cache()  # before numba is imported: compiled kernels need a writable cache
 
 
 def __getattr__(name: str):

@@ -1,6 +1,6 @@
 """The machine a speed figure was measured on: CPU model, logical cores, SIMD level, versions.
 
-Frames per second mean little without the CPU: the tracker's compiled kernels and FFTW plans
+Frames per second mean little without the CPU: the tracker's compiled kernels and FFTs
 use the widest SIMD the CPU has, and the same code runs about twice as fast on a CPU with
 AVX-512 as on one with AVX2 only (docs/benchmarks.md, twelfth round). `autotrack bench` writes
 this description into its JSON summary and prints it under its table; the speed benchmark
@@ -25,7 +25,7 @@ SIMD_LEVELS = (
 )
 """(/proc/cpuinfo flag, name), widest first: the first flag the CPU has names its SIMD level."""
 
-LIBRARIES = ("numpy", "numba", "opencv-contrib-python-headless", "pyfftw", "scipy")
+LIBRARIES = ("numpy", "numba", "opencv-contrib-python-headless", "scipy")
 """The libraries whose builds set the speed of a frame, in the description's order."""
 
 

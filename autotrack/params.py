@@ -8,11 +8,16 @@ from typing import Literal
 
 ColourFeature = Literal["lab11", "table", "none"]
 ThetaUpdate = Literal["release", "paper", "reference"]
+BackendName = Literal["fast", "reference"]
 
 
 @dataclass(frozen=True)
 class TrackerParams:
     """AutoTrack parameters. Defaults are the authors' released settings (run_AutoTrack.m)."""
+
+    backend: BackendName = "fast"
+    """Where the per-frame maths runs: "fast" (compiled kernels, `tracker.backend`) or
+    "reference" (the plain numpy definition, `tracker.dcf`, `tracker.features`; ~10x slower)."""
 
     # Features
     cell_size: int = 4
@@ -93,7 +98,7 @@ class TrackerParams:
     scale_model_max_area: float = 32.0 * 16.0
     """Largest area (pixels^2) of a resampled scale sample."""
 
-    # Beyond the release (the `autotrack+` preset, autotrack/tracker/robust.py and redetect.py); every
+    # Beyond the release (the `autotrack+` preset, autotrack/tracker/plus/robust.py and redetect.py); every
     # switch is off in the faithful presets, which then run the release's code path unchanged.
     robust_variation: bool = False
     """Local variation with its denominator floored at `variation_floor` x the previous peak
@@ -167,6 +172,8 @@ class TrackerParams:
         from autotrack.errors import InputError
 
         problems = []
+        if self.backend not in ("fast", "reference"):
+            problems.append(f"backend must be 'fast' or 'reference', got {self.backend!r}")
         if self.cell_size < 1:
             problems.append("cell_size must be at least 1")
         if not self.search_area_scale > 0:

@@ -42,7 +42,7 @@ from autotrack.io.frames import open_frames
 from autotrack.localization.scene import load_scene
 from autotrack.params import preset
 from autotrack.pipeline import localize_sequence
-from autotrack.tracker.target_process import WorkerPool
+from autotrack.tracker.parallel.target_process import WorkerPool
 
 """
     + inspect.getsource(_children_cpu)

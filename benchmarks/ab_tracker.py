@@ -30,7 +30,6 @@ import sys
 import tarfile
 import tempfile
 import time
-from contextlib import contextmanager
 from dataclasses import fields, replace
 from pathlib import Path
 
@@ -125,24 +124,6 @@ def parse_overrides(text: str) -> dict:
     return overrides
 
 
-@contextmanager
-def wisdom_set_aside(base):
-    """A revision before the wisdom file estimated its plans in a process without wisdom; FFTW's
-    wisdom is process-wide and an estimated plan takes a measured one from it, so it is set
-    aside while such a revision plans."""
-    if importlib.util.find_spec(f"{BASE_PACKAGE}.tracker.fft_plans") is not None:
-        yield
-        return
-    from autotrack.tracker.fft_plans import pyfftw
-
-    saved = pyfftw.export_wisdom()
-    pyfftw.forget_wisdom()
-    try:
-        yield
-    finally:
-        pyfftw.import_wisdom(saved)
-
-
 def compare(base, new, sequence_dir: Path, preset_name: str, frames: int, overrides: dict) -> tuple:
     """(base ms, new ms, identical, updates) on one sequence."""
     from autotrack.evaluation.datasets import load_otb_sequence
@@ -153,8 +134,7 @@ def compare(base, new, sequence_dir: Path, preset_name: str, frames: int, overri
     params = [module.preset(preset_name, str(COLOUR_TABLE)) for module in (base, new)]
     params[1] = replace(params[1], **overrides)
     trackers = [module.AutoTrack(p) for module, p in zip((base, new), params, strict=True)]
-    with wisdom_set_aside(base):
-        trackers[0].init(images[0], sequence.init_box)
+    trackers[0].init(images[0], sequence.init_box)
     trackers[1].init(images[0], sequence.init_box)
     spent = [0.0, 0.0]
     identical = True

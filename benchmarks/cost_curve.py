@@ -87,7 +87,7 @@ def measure_point(width: int, height: int, side: float, targets: int, threads: i
 
     from autotrack.io.jpeg import decode_jpeg
     from autotrack.params import preset
-    from autotrack.tracker.multi import MultiTracker
+    from autotrack.tracker.parallel.multi import MultiTracker
 
     cv2.setNumThreads(1)
     source = _SlidingTexture(width, height, frames)

@@ -12,6 +12,7 @@ sequences with the authors' own outputs (ours vs the authors').
 
     python benchmarks/fidelity.py --jobs 2 --color-names ../shared/data/color_names/cn_norm_32768x10.npy
     python benchmarks/fidelity.py --preset strcf --jobs 2
+    python benchmarks/fidelity.py --backend reference --jobs 2   # the plain numpy tracker
 """
 
 from __future__ import annotations
@@ -19,7 +20,7 @@ from __future__ import annotations
 import argparse
 import time
 from concurrent.futures import ProcessPoolExecutor
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
@@ -35,11 +36,13 @@ OCTAVE = ("reference", "autotrack_release_octave")
 OFFICIAL = ("reference", "autotrack_official")
 
 
-def track_sequence(job: tuple[str, str, str, str | None]) -> tuple[str, str, np.ndarray, float]:
-    """(dataset, folder, preset, colour table) -> (dataset, name, 0-based boxes, tracking fps)."""
-    dataset, folder, preset_name, colour_table = job
+def track_sequence(
+    job: tuple[str, str, str, str | None, str],
+) -> tuple[str, str, np.ndarray, float]:
+    """(dataset, folder, preset, colour table, backend) -> (dataset, name, 0-based boxes, fps)."""
+    dataset, folder, preset_name, colour_table, backend = job
     sequence = load_otb_sequence(Path(folder))[0]
-    tracker = AutoTrack(preset(preset_name, colour_table))
+    tracker = AutoTrack(replace(preset(preset_name, colour_table), backend=backend))
     boxes = np.zeros((len(sequence.frame_paths), 4))
     elapsed = 0.0
     for index, path in enumerate(sequence.frame_paths):
@@ -52,8 +55,12 @@ def track_sequence(job: tuple[str, str, str, str | None]) -> tuple[str, str, np.
 
 
 def sequence_jobs(
-    shared: Path, preset_name: str, colour_table: str | None, wanted: set[str] | None = None
-) -> list[tuple[str, str, str, str | None]]:
+    shared: Path,
+    preset_name: str,
+    colour_table: str | None,
+    wanted: set[str] | None = None,
+    backend: str = "fast",
+) -> list[tuple[str, str, str, str | None, str]]:
     """One job per sequence folder (holding a ground truth) under shared/sequences/<dataset>/."""
     jobs = []
     for dataset_dir in sorted((shared / "sequences").iterdir()):
@@ -63,7 +70,7 @@ def sequence_jobs(
             if (folder / "groundtruth_rect.txt").is_file() and (
                 not wanted or folder.name in wanted
             ):
-                jobs.append((dataset_dir.name, str(folder), preset_name, colour_table))
+                jobs.append((dataset_dir.name, str(folder), preset_name, colour_table, backend))
     return jobs
 
 
@@ -208,6 +215,7 @@ def print_table(rows: list[SequenceFidelity]) -> FidelityMeans:
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--preset", default="autotrack")
+    parser.add_argument("--backend", choices=("fast", "reference"), default="fast")
     parser.add_argument("--color-names", default=None, help="published Color Names table (.npy)")
     parser.add_argument("--jobs", type=int, default=1)
     parser.add_argument("--sequences", default="", help="comma-separated subset")
@@ -217,7 +225,7 @@ def main() -> None:
 
     shared = Path(args.shared)
     wanted = {s for s in args.sequences.split(",") if s}
-    jobs = sequence_jobs(shared, args.preset, args.color_names, wanted)
+    jobs = sequence_jobs(shared, args.preset, args.color_names, wanted, args.backend)
     outputs = track_all(jobs, args.jobs)
     rows = [compare(shared, dataset, name, boxes, fps) for dataset, name, boxes, fps in outputs]
     print_table(rows)

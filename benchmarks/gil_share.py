@@ -38,7 +38,7 @@ RELEASING = (
     "shifted_spectrum",
     "scaled_sum",
     "apply_gain",
-    "pypocketfft",
+    "pypocketfft",  # scipy.fft's transforms
     "c_einsum",
 )
 """Names of the calls that release the GIL (substrings of cProfile's function names)."""
@@ -65,7 +65,7 @@ def main() -> None:
 
     from autotrack.io.frames import open_frames
     from autotrack.params import preset
-    from autotrack.tracker.multi import MultiTracker
+    from autotrack.tracker.parallel.multi import MultiTracker
 
     cv2.setNumThreads(1)
     with tempfile.TemporaryDirectory() as folder:

@@ -16,7 +16,7 @@ Prints
    `--multi-repeats` times (default 3), interleaved, and its line gives the median run and the
    rate of every run (this VM's end-to-end figure varies by +-15% from run to run);
 3. start-up: the time from launching a fresh Python process to its first tracked frame, for a
-   first process with an empty kernel cache and FFTW wisdom and a second one that finds them filled;
+   first process with an empty kernel cache and a second one that finds it filled;
 4. the regression guard: AutoTrack's boxes against the pre-optimisation boxes kept in
    benchmarks/reference_boxes/ (exit status 1 when it fails).
 
@@ -44,7 +44,7 @@ import numpy as np
 
 if TYPE_CHECKING:
     from autotrack.params import TrackerParams
-    from autotrack.tracker.target_process import WorkerPool
+    from autotrack.tracker.parallel.target_process import WorkerPool
 
 ROOT = Path(__file__).resolve().parents[1]
 SHARED = ROOT / ".." / "shared" / "data"
@@ -274,12 +274,10 @@ print(time.time())
 
 
 def time_to_first_frame(cache_dir: Path, source: Path | None = None) -> float:
-    """Seconds from launching `python` to its first tracked frame (kernel cache, FFTW wisdom and
-    the user cache of built tables in cache_dir: the first process compiles and measures its
-    plans, the second loads them). `source`: a folder holding another `autotrack/` to import
+    """Seconds from launching `python` to its first tracked frame (numba's kernel cache in
+    cache_dir: the first process compiles, the second loads). `source`: a folder holding another `autotrack/` to import
     (run from there, so it comes first on the import path); this checkout's when None."""
     env = dict(os.environ, NUMBA_CACHE_DIR=str(cache_dir), AUTOTRACK_CACHE_DIR=str(cache_dir))
-    env.pop("AUTOTRACK_FFTW_WISDOM", None)
     if source is not None:
         env["PYTHONPATH"] = str(source)
     sequence = SHARED / "sequences" / "UAV123_10fps" / "building5"
@@ -305,18 +303,17 @@ def print_startup(runs: int) -> None:
             seconds.append(time_to_first_frame(Path(cache)))
     if len(firsts) == 1:
         detail = (
-            f"first {firsts[0]:.2f} s (empty kernel cache and FFTW wisdom: compiles, measures"
-            f" plans), second {seconds[0]:.2f} s"
+            f"first {firsts[0]:.2f} s (empty kernel cache: compiles), second {seconds[0]:.2f} s"
         )
     else:
         detail = (
             f"first {' '.join(f'{t:.2f}' for t in firsts)} s (median {statistics.median(firsts):.2f};"
-            f" empty kernel cache and FFTW wisdom: compiles, searches FFT plans), second {' '.join(f'{t:.2f}' for t in seconds)} s"
+            f" empty kernel cache: compiles), second {' '.join(f'{t:.2f}' for t in seconds)} s"
             f" (median {statistics.median(seconds):.2f})"
         )
     load = os.getloadavg()
     print(
-        f"\ntime to first tracked frame (fresh python process): {detail} (cached kernels and plans;"
+        f"\ntime to first tracked frame (fresh python process): {detail} (cached kernels;"
         f" load average after: {load[0]:.1f})"
     )
 
@@ -422,11 +419,10 @@ def main() -> int:
     from autotrack.machine import describe_machine, machine_line
 
     print(f"machine: {machine_line(describe_machine())}")
-    from autotrack.tracker.warmup import warm_up
+    from autotrack.tracker.parallel.warmup import warm_up
 
-    # The kernel cache is named by a digest of the package's sources (compile_cache): after any
-    # edit or upgrade the first tracker would compile inside its timed run.
-    print(f"kernels and FFT plans ready before any timing: {warm_up():.1f} s", flush=True)
+    # After an edit or an upgrade the first tracker would compile inside its timed run.
+    print(f"kernels ready before any timing: {warm_up():.1f} s", flush=True)
 
     result = None
     if not args.skip_single:
@@ -450,8 +446,8 @@ def main() -> int:
                 f"\nfour targets + pose, {args.multi_frames} frames of 1280x720 JPEG, end to end "
                 f"({args.multi_repeats} interleaved runs of each line):"
             )
-            from autotrack.tracker.multi import default_concurrency
-            from autotrack.tracker.target_process import WorkerPool
+            from autotrack.tracker.parallel.multi import default_concurrency
+            from autotrack.tracker.parallel.target_process import WorkerPool
 
             default = default_concurrency(4)
             with WorkerPool() as pool:

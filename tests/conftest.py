@@ -7,7 +7,6 @@ them use the markers below and skip with one clear line when the data is absent.
 
 from __future__ import annotations
 
-import os
 from pathlib import Path
 
 import pytest
@@ -35,18 +34,3 @@ def shared_sequence_dir(dataset: str, name: str) -> Path:
     if not folder.is_dir():
         pytest.skip(f"sequence {dataset}/{name} not found under {SEQUENCES}")
     return folder
-
-
-@pytest.fixture(autouse=True, scope="session")
-def _own_fftw_wisdom(tmp_path_factory):
-    """The session's FFTW plans are measured into a wisdom file of its own (inherited by the
-    child processes it starts), never into the user's cache."""
-    from autotrack.tracker.fft_plans import WISDOM_ENV
-
-    previous = os.environ.get(WISDOM_ENV)
-    os.environ[WISDOM_ENV] = str(tmp_path_factory.mktemp("fftw") / "wisdom.json")
-    yield
-    if previous is None:
-        os.environ.pop(WISDOM_ENV, None)
-    else:
-        os.environ[WISDOM_ENV] = previous

@@ -203,7 +203,7 @@ def test_playing_with_speculating_children_gives_the_results_of_one_process(
 ) -> None:
     """While playing, the child process starts on the next frame as the current one is shown;
     a pause and a corrected box undo it. Boxes, maps and poses: those of one process."""
-    from autotrack.tracker.multi import MultiTracker
+    from autotrack.tracker.parallel.multi import MultiTracker
     from tests.test_target_process import assert_identical
 
     started, undone = [], []

@@ -63,7 +63,7 @@ def media(tmp_path: Path) -> Path:
 def test_a_video_played_live_is_tracked_on_its_newest_frames_recorded_and_reopened(
     tmp_path: Path, media: Path
 ) -> None:
-    from autotrack.tracker.warmup import warm_up
+    from autotrack.tracker.parallel.warmup import warm_up
 
     warm_up()  # as the server does at start: no kernel compiling inside the live run
     controller, live = _live_tab(tmp_path)
@@ -252,7 +252,7 @@ class _MjpegStream:
 def test_a_stream_that_disconnects_mid_run_says_so_and_keeps_the_recording(
     tmp_path: Path, media: Path
 ) -> None:
-    from autotrack.tracker.warmup import warm_up
+    from autotrack.tracker.parallel.warmup import warm_up
 
     warm_up()
     camera = _MjpegStream()

@@ -6,13 +6,20 @@ import cv2
 import numpy as np
 import pytest
 
-from autotrack.tracker.area_resample import (
+from autotrack.tracker.backend.area_resample import (
     area_path_is_generic,
     area_paths_are_generic,
     area_resize_crop,
     area_resize_crops,
 )
-from autotrack.tracker.sampling import crop_replicate, resize_auto, scale_patches, search_patch
+from autotrack.tracker.backend.fast_sampling import search_patch, sized_patches
+from autotrack.tracker.sampling import crop_replicate, resize_auto, scale_sizes
+
+
+def scale_patches(image, position, base_target_size_hw, factors, model_size_hw):
+    """The scale samples of `factors` (the scale filter's `sized_patches(scale_sizes(...))`)."""
+    sizes = scale_sizes(base_target_size_hw, factors)
+    return sized_patches(image, position, sizes, model_size_hw)
 
 
 def _opencv_sample(image, top, left, size_hw, out_hw):
@@ -132,7 +139,7 @@ def test_strided_frames_give_the_same_samples():
 
 def _tap_count(src: int, dst: int) -> int:
     """The most horizontal taps an output element of a src -> dst shrink takes (OpenCV's table)."""
-    from autotrack.tracker.area_resample import _area_taps
+    from autotrack.tracker.backend.area_resample import _area_taps
 
     first = np.empty(2 * src + 2, np.int64)
     weights = np.empty(2 * src + 2, np.float32)

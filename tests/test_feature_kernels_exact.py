@@ -15,8 +15,9 @@ import cv2
 import numpy as np
 import pytest
 
-from autotrack.tracker.features import colour_table_feature, load_colour_table
-from autotrack.tracker.fhog import fhog, fhog_batch, fhog_weighted_into
+from autotrack.tracker.backend.fast_features import colour_table_feature
+from autotrack.tracker.backend.fast_fhog import fhog, fhog_batch, fhog_weighted_into
+from autotrack.tracker.features import load_colour_table
 from tests.conftest import COLOUR_TABLE, SEQUENCES
 
 FRAMES = {

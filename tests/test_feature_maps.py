@@ -14,17 +14,24 @@ from autotrack.errors import InputError
 from autotrack.evaluation.datasets import load_otb_sequence
 from autotrack.io.frames import read_image
 from autotrack.params import TrackerParams
-from autotrack.tracker.features import (
+from autotrack.tracker.backend.fast_features import (
     colour_table_feature,
     feature_maps,
     grey_feature,
-    lab11_table,
-    load_colour_table,
     scale_features,
 )
-from autotrack.tracker.fhog import fhog
-from autotrack.tracker.sampling import scale_patches
+from autotrack.tracker.backend.fast_fhog import fhog
+from autotrack.tracker.backend.fast_sampling import sized_patches
+from autotrack.tracker.features import lab11_table, load_colour_table
+from autotrack.tracker.sampling import scale_sizes
 from tests.conftest import COLOUR_TABLE, needs_colour_table, shared_sequence_dir
+
+
+def scale_patches(image, position, base_target_size_hw, factors, model_size_hw):
+    """The scale samples of `factors` (the scale filter's `sized_patches(scale_sizes(...))`)."""
+    sizes = scale_sizes(base_target_size_hw, factors)
+    return sized_patches(image, position, sizes, model_size_hw)
+
 
 CASES = (("DTB70", "Surfing06"), ("UAV123_10fps", "boat5"), ("OTB", "Dog1"))
 """Colour frames (a small and a large target) and a grey one."""
@@ -58,12 +65,12 @@ def test_windowed_maps_in_the_transform_buffer_equal_the_old_product(dataset, na
     for tracker, image in tracked_frames(dataset, name, params):
         patch = tracker._sampler(image).patch(tracker.angle)
         expected = channel_last_stack(patch, params, table).transpose(2, 0, 1) * tracker.cos_window
-        buffer = tracker.transform.input_maps
+        buffer = tracker.backend.transform.input_maps
         written = feature_maps(patch, params, table, tracker.cos_window, out=buffer)
         assert written is buffer
         assert written.tobytes() == expected.tobytes()
-        spectrum = tracker.transform.forward(buffer).copy()
-        assert spectrum.tobytes() == tracker.transform.forward(expected.copy()).tobytes()
+        spectrum = tracker.backend.transform.forward(buffer).copy()
+        assert spectrum.tobytes() == tracker.backend.transform.forward(expected.copy()).tobytes()
         assert (
             feature_maps(patch, params, table).tobytes()
             == np.ascontiguousarray(

@@ -11,7 +11,8 @@ from autotrack import AutoTrack
 from autotrack.errors import InputError
 from autotrack.evaluation.metrics import center_errors
 from autotrack.params import PRESETS, TrackerParams
-from autotrack.tracker import dcf, memory, motion
+from autotrack.tracker import dcf
+from autotrack.tracker.plus import memory, motion
 from tests.sequences import appearing_twin_sequence, passing_distractor_sequence
 
 

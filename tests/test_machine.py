@@ -3,12 +3,9 @@ file's CPU key, read from /proc/cpuinfo texts of three kinds of CPU."""
 
 from __future__ import annotations
 
-from pathlib import Path
-
 import pytest
 
 from autotrack import machine
-from autotrack.tracker import fft_plans
 
 
 def _cpuinfo(model: str, flags: str, processors: int = 2, family: str = "25") -> str:
@@ -50,19 +47,3 @@ def test_only_the_first_cpus_lines_are_read():
     lines = machine.cpuinfo_lines(ZEN3.replace("avx2", "avx2 first", 1))
     assert machine.cpu_fields(lines)["flags"].endswith("avx2 first fma")
     assert machine.simd_level("fpu sse2") == "unknown"
-
-
-def test_fftw_wisdom_is_kept_per_cpu_kind_not_per_cpu_count(tmp_path: Path, monkeypatch):
-    """Wisdom names SIMD codelets: another CPU model or flags give another file, the same CPU
-    with more cores the same one."""
-
-    def key(text: str) -> str:
-        path = tmp_path / "cpuinfo"
-        path.write_text(text)
-        monkeypatch.setattr(machine, "CPUINFO", path)
-        return fft_plans._machine_key()
-
-    zen3 = key(ZEN3)
-    assert key(_cpuinfo("AMD EPYC 7B13", "sse4_2 avx avx2 fma", processors=8)) == zen3
-    assert key(SKYLAKE_SP) != zen3
-    assert key(ZEN3.replace("avx2 fma", "avx2 fma avx512f")) != zen3

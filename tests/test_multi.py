@@ -14,7 +14,7 @@ from autotrack.params import preset
 from autotrack.synthetic.renderer import render_sequence
 from autotrack.synthetic.testbed import read_ground_truth_boxes
 from autotrack.synthetic.trajectories import RenderSettings, SequenceSpec
-from autotrack.tracker.multi import MultiTracker
+from autotrack.tracker.parallel.multi import MultiTracker
 from autotrack.tracker.tracker import AutoTrack
 
 FRAMES = 12

@@ -13,7 +13,9 @@ from autotrack.evaluation.benchmark import run_task
 from autotrack.evaluation.datasets import load_sequences
 from autotrack.evaluation.metrics import center_errors, overlaps, score_sequence, summarize
 from autotrack.params import PRESETS
-from autotrack.tracker import dcf, redetect, regularization, robust
+from autotrack.tracker import dcf, regularization
+from autotrack.tracker.backend import ReferenceBackend
+from autotrack.tracker.plus import redetect, robust
 from autotrack.tracker.scale import ScaleFilter
 from tests.conftest import SEQUENCES, needs_sequences
 from tests.sequences import moving_target_sequence
@@ -79,8 +81,7 @@ def test_acting_asr_changes_the_learnt_filter_where_the_release_asr_does_not():
     rng = np.random.default_rng(3)
     grid, region_size, channels = (24, 24), (8, 8), 4
     features = rng.standard_normal((channels, *grid)).astype(np.float32)
-    transform = dcf.SpectrumTransform(channels, grid)
-    xf = transform.forward(features)
+    xf = dcf.to_spectrum(features)
     yf = dcf.to_spectrum(dcf.gaussian_label(grid, 1.5).astype(np.float32))
     settings = dcf.AdmmSettings(4, 1.0, 1.0, 10.0, 1e4)
     base = regularization.base_spatial_window(grid, region_size, 1e5, 1e-3)
@@ -91,7 +92,7 @@ def test_acting_asr_changes_the_learnt_filter_where_the_release_asr_does_not():
     acting = robust.acting_spatial_window(base, variation, region, 0.2, 1.0, 1.0)
 
     def train(window):
-        g_f, _ = dcf.train_filter(xf, yf, np.zeros_like(xf), window, 0.0, settings, transform)
+        g_f, _ = dcf.train_filter(xf, yf, np.zeros_like(xf), window, 0.0, settings)
         return dcf.from_spectrum(g_f, grid)
 
     unregularised = train(base)
@@ -224,10 +225,11 @@ def test_redetection_finds_a_target_that_jumped_beyond_the_search_region():
 def test_scale_model_keeps_four_cells_across_a_thin_target():
     target = np.array([55.0, 13.0])  # rows, cols: a thin upright target
     params = PRESETS["autotrack"]
-    release = ScaleFilter(params, target, target, np.array([120.0, 120.0]), (720, 1280))
+    backend = ReferenceBackend(params, None, (1, 1))
+    release = ScaleFilter(params, target, target, np.array([120.0, 120.0]), (720, 1280), backend)
     assert release.model_size_hw[1] < 16  # area <= 512 px^2 leaves ~3 fHOG cells across
     plus = replace(params, scale_model_min_side=16.0)
-    kept = ScaleFilter(plus, target, target, np.array([120.0, 120.0]), (720, 1280))
+    kept = ScaleFilter(plus, target, target, np.array([120.0, 120.0]), (720, 1280), backend)
     assert kept.model_size_hw[1] == 16
     assert kept.model_size_hw[0] / kept.model_size_hw[1] == pytest.approx(55 / 13, rel=0.05)
 

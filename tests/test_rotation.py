@@ -11,7 +11,7 @@ import pytest
 
 from autotrack.errors import InputError
 from autotrack.params import PRESETS, TrackerParams
-from autotrack.tracker import rotation
+from autotrack.tracker.plus import rotation
 from autotrack.tracker.sampling import search_patch
 from autotrack.tracker.tracker import AutoTrack
 from tests.sequences import spinning_target_sequence
@@ -149,7 +149,7 @@ def test_turn_wins_with_a_higher_peak_over_the_same_sidelobes_only():
     assert not rotation.turn_wins(_response(1.2, sidelobe=0.9), current, 0.05)
 
 
-def test_one_sampler_resamples_the_region_once_for_every_angle(monkeypatch):
+def test_one_sampler_resamples_the_region_once_for_every_angle():
     image = _textured_image().astype(np.uint8)
     args = ((120.0, 160.0), (150, 150), (100, 100))
     fresh = [rotation.TurnedSampler(image, *args).patch(a) for a in (10.0, -10.0, 0.0)]
@@ -159,8 +159,7 @@ def test_one_sampler_resamples_the_region_once_for_every_angle(monkeypatch):
         resamplings.append(call[2])
         return search_patch(*call)
 
-    monkeypatch.setattr(rotation, "search_patch", counted)
-    sampler = rotation.TurnedSampler(image, *args)
+    sampler = rotation.TurnedSampler(image, *args, counted)
     shared = [sampler.patch(a) for a in (10.0, -10.0, 0.0)]
     for one, other in zip(fresh, shared, strict=True):
         np.testing.assert_array_equal(one, other)

@@ -8,7 +8,19 @@ import cv2
 import numpy as np
 import pytest
 
-from autotrack.tracker.sampling import crop_replicate, resize_auto, scale_patches, search_patch
+from autotrack.tracker.sampling import (
+    crop_replicate,
+    resize_auto,
+    scale_sizes,
+    search_patch,
+    sized_patches,
+)
+
+
+def scale_patches(image, position, base_target_size_hw, factors, model_size_hw):
+    """The scale samples of `factors` (the scale filter's `sized_patches(scale_sizes(...))`)."""
+    sizes = scale_sizes(base_target_size_hw, factors)
+    return sized_patches(image, position, sizes, model_size_hw)
 
 
 def clamped_crop(image: np.ndarray, position, size_hw) -> np.ndarray:

@@ -10,6 +10,7 @@ import numpy as np
 import pytest
 
 from autotrack.params import TrackerParams
+from autotrack.tracker.backend import ReferenceBackend
 from autotrack.tracker.scale import ScaleFilter, symmetric_hann
 
 PARAMS = TrackerParams()
@@ -27,7 +28,10 @@ def make_filter(
     image_hw=IMAGE_HW,
 ) -> ScaleFilter:
     target = np.asarray(target_hw, dtype=np.float64)
-    return ScaleFilter(params, target, target, np.asarray(search_hw, dtype=np.float64), image_hw)
+    search = np.asarray(search_hw, dtype=np.float64)
+    return ScaleFilter(
+        params, target, target, search, image_hw, ReferenceBackend(params, None, (1, 1))
+    )
 
 
 def _texture(rng: np.random.Generator, size: int = 64) -> np.ndarray:
@@ -242,38 +246,3 @@ def test_update_at_the_detected_scale_learns_this_frames_transform_exactly():
         )
         expected = (1 - rate) * denominator + rate * energy
         np.testing.assert_allclose(scale._denominator, expected, rtol=1e-6)
-
-
-def test_half_spectrum_model_gives_the_full_spectrum_filter_bit_for_bit():
-    """The model kept for the non-negative frequencies (`ScaleFilter.response`) gives, frame
-    after frame, the response and model values of the full-spectrum filter it replaced: full
-    FFTs of the same samples, the same kernels over all 33 frequencies, the complex inverse."""
-    import scipy.fft
-
-    from autotrack.tracker.scale import _learn, _response_spectrum
-
-    scale = make_filter()
-    n, rate, half = PARAMS.num_scales, PARAMS.scale_learning_rate, PARAMS.num_scales // 2 + 1
-    first = target_image(SIDE)
-    scale.update(first, POSITION, 1.0, best=None)
-    samples_f = scipy.fft.fft(scale._extract(first, POSITION, 1.0, np.arange(n)), axis=0)
-    numerator, denominator = np.empty_like(samples_f), np.empty(n, np.float32)
-    _learn(numerator, denominator, scale.label_f, samples_f, rate, True)
-    estimate, chosen = 1.0, set()
-    for seed, side in enumerate((SIDE * 1.04, SIDE * 1.08, SIDE, SIDE * 0.93, SIDE * 0.9), 1):
-        image = target_image(side, seed=seed)
-        best, new_estimate = scale.detect(image, POSITION, estimate)
-        samples_f = scipy.fft.fft(scale._samples, axis=0, workers=1)
-        response_f = np.empty(n, np.complex64)
-        _response_spectrum(numerator, denominator, samples_f, PARAMS.scale_lambda, response_f)
-        expected = scipy.fft.ifft(response_f, workers=1).real
-        np.testing.assert_array_equal(scale.response(scale._samples_f), expected)
-        assert best == int(expected.argmax())
-        reused = scale._shifted_samples(image, POSITION, new_estimate, best)
-        samples_f = scipy.fft.fft(reused, axis=0, workers=1)
-        _learn(numerator, denominator, scale.label_f, samples_f, rate, False)
-        scale.update(image, POSITION, new_estimate, best)
-        np.testing.assert_array_equal(scale._numerator, numerator[:half])
-        np.testing.assert_array_equal(scale._denominator, denominator[:half])
-        estimate, chosen = new_estimate, chosen | {best}
-    assert len(chosen) >= 3  # scale changes: the shifted reuse and fresh samples both ran

@@ -11,7 +11,7 @@ from autotrack import AutoTrack, preset
 from autotrack.errors import InputError
 from autotrack.evaluation.metrics import center_errors, overlaps
 from autotrack.params import PRESETS, TrackerParams
-from autotrack.tracker.aspect import aspect_sizes
+from autotrack.tracker.plus.aspect import aspect_sizes
 from tests.sequences import accelerating_target_sequence, moving_target_sequence
 
 

@@ -23,8 +23,8 @@ from autotrack.pipeline import Pipeline, localize_sequence
 from autotrack.pipeline.targets import FrameOutcome
 from autotrack.synthetic.scenarios import Occluder, ScenarioSpec, render_scenario
 from autotrack.synthetic.trajectories import RenderSettings, SequenceSpec
-from autotrack.tracker.multi import MultiTracker
-from autotrack.tracker.target_process import WorkerPool
+from autotrack.tracker.parallel.multi import MultiTracker
+from autotrack.tracker.parallel.target_process import WorkerPool
 from tests import test_multi
 from tests.test_target_process import assert_identical
 

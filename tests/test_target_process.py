@@ -15,9 +15,9 @@ from autotrack.io.frames import open_frames
 from autotrack.localization.scene import load_scene
 from autotrack.params import preset
 from autotrack.pipeline import localize_sequence
-from autotrack.tracker import multi
-from autotrack.tracker.multi import MultiTracker
-from autotrack.tracker.target_process import WorkerError, WorkerPool
+from autotrack.tracker.parallel import multi
+from autotrack.tracker.parallel.multi import MultiTracker
+from autotrack.tracker.parallel.target_process import WorkerError, WorkerPool
 from tests import test_localize, test_multi
 from tests.test_multi import run
 

@@ -185,7 +185,7 @@ def _check_arguments(args: argparse.Namespace) -> None:
 
 def _choose_concurrency(args: argparse.Namespace, target_count: int) -> None:
     """--threads and --processes where not given (`chosen_concurrency`)."""
-    from autotrack.tracker.multi import chosen_concurrency
+    from autotrack.tracker.parallel.multi import chosen_concurrency
 
     args.threads, args.processes = chosen_concurrency(args.threads, args.processes, target_count)
 

@@ -358,7 +358,7 @@ class FrameCache:
         if image is None:
             image = self.frames.read(index)
         # Read-only: every caller shares the cached array (and a tracker that speculated on it
-        # trusts that it does not change, `autotrack.tracker.speculation`).
+        # trusts that it does not change, `autotrack.tracker.parallel.speculation`).
         image.flags.writeable = False
         self._cached[index] = image
         if len(self._cached) > self.size:

@@ -17,7 +17,6 @@ import numpy as np
 from autotrack.errors import InputError
 from autotrack.localization.camera import CameraIntrinsics, camera_pose_from_pnp
 from autotrack.localization.scene import Scene
-from autotrack.scipy_binaries import load_compiled
 
 Box = tuple[float, float, float, float]
 
@@ -92,15 +91,9 @@ def weighted_refinement(
     Levenberg-Marquardt on OpenCV's analytic Jacobian, what solvePnPRefineLM does for equal
     weights.
 
-    MINPACK's lmder with the settings `least_squares(..., method="lm", xtol=1e-12, ftol=1e-12,
-    x_scale="jac")` gives it (gtol 1e-8, at most 100 n evaluations, step bound factor 100,
-    MINPACK's own column scaling), called as `scipy.optimize.leastsq` calls it, on scipy's
-    compiled `_minpack` loaded alone (`scipy_binaries`): the same solver on the same numbers
-    (tests/test_pnp_refine.py compares with leastsq bit for bit), without importing
-    scipy.optimize (~0.45 s, a stall of the first frame with a down-weighted landmark) and
-    without leastsq's argument checks and covariance. One projection serves both the residuals
-    and the Jacobian at a point (MINPACK asks for the Jacobian at the point it has just
-    evaluated).
+    `scipy.optimize.least_squares(method="lm", xtol=1e-12, ftol=1e-12, x_scale="jac")` (MINPACK's
+    lmder: gtol 1e-8, at most 100 n evaluations). One projection serves both the residuals and
+    the Jacobian at a point (MINPACK asks for the Jacobian at the point it has just evaluated).
     """
     scale = np.repeat(np.sqrt(np.asarray(weights, dtype=np.float64)), 2)
     projection = _CachedProjection(camera, object_points)
@@ -116,13 +109,11 @@ def weighted_refinement(
     start = np.asarray(start, dtype=np.float64).flatten()  # a copy: MINPACK works in place
     if residuals(start).size < start.size:
         raise InputError(f"a pose refinement needs at least 3 points, got {len(image_points)}")
-    minpack = load_compiled("scipy.optimize._minpack")
-    # _lmder(func, Dfun, x0, args, full_output, col_deriv, ftol, xtol, gtol, maxfev, factor,
-    # diag) -> (x, info): its status (MINPACK's 1-8) is not needed, as least_squares reports
-    # none either; a stop on the evaluation limit keeps its last point.
-    solution, _ = minpack._lmder(
-        residuals, jacobian, start, (), 0, 0, 1e-12, 1e-12, 1e-8, 100 * start.size, 100.0, None
-    )
+    from scipy.optimize import least_squares  # ~0.45 s to import: only when weights differ
+
+    solution = least_squares(
+        residuals, start, jac=jacobian, method="lm", xtol=1e-12, ftol=1e-12, x_scale="jac"
+    ).x
     return np.asarray(solution, dtype=np.float64)
 
 

@@ -18,8 +18,8 @@ import numpy as np
 from autotrack.io.frames import FrameSource
 from autotrack.params import TrackerParams
 from autotrack.result import TrackResult
-from autotrack.tracker.multi import MultiTracker
-from autotrack.tracker.target_process import WorkerPool
+from autotrack.tracker.parallel.multi import MultiTracker
+from autotrack.tracker.parallel.target_process import WorkerPool
 
 Box = tuple[float, float, float, float]
 

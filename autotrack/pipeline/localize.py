@@ -16,7 +16,7 @@ from autotrack.params import TrackerParams
 from autotrack.pipeline.pipeline import Pipeline
 from autotrack.pipeline.recording import Recording
 from autotrack.pipeline.targets import FrameOutcome
-from autotrack.tracker.target_process import WorkerPool
+from autotrack.tracker.parallel.target_process import WorkerPool
 
 Box = tuple[float, float, float, float]
 

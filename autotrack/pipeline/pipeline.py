@@ -44,7 +44,7 @@ from autotrack.result import PoseEstimate, TrackResult
 from autotrack.sessions import Session, SessionRecorder
 from autotrack.sessions.maps import FrameMaps, SessionMaps
 from autotrack.sessions.messages import landmark_positions
-from autotrack.tracker.target_process import WorkerPool
+from autotrack.tracker.parallel.target_process import WorkerPool
 
 Box = tuple[float, float, float, float]
 

@@ -22,14 +22,11 @@ from functools import lru_cache
 from pathlib import Path
 
 import numpy as np
-from numba import njit
 
-from autotrack.compile_cache import cached_array
 from autotrack.errors import InputError
 from autotrack.params import TrackerParams
-from autotrack.tracker import colour_terms
 from autotrack.tracker.colour_terms import COLOUR_TABLE_ROWS, build_lab11_table
-from autotrack.tracker.fhog import fhog_batch, fhog_channels, fhog_weighted_into
+from autotrack.tracker.fhog import fhog, fhog_channels
 
 GREY_CHANNELS = 1
 FHOG_CHANNELS = fhog_channels(9) - 1  # the toolbox's all-zero truncation channel is dropped
@@ -58,29 +55,6 @@ def _check_cell(cell_size: int) -> int:
     return int(cell_size)
 
 
-@njit(cache=True, nogil=True, fastmath=False, error_model="numpy")
-def _cell_means(values, cell, out):
-    """Block means of (H, W, K) values into (H//cell, W//cell, K), accumulated in float32."""
-    rows, cols, depth = out.shape
-    width = cols * cell * depth
-    band = np.empty(width, np.float32)
-    scale = np.float32(1.0) / np.float32(cell * cell)
-    for row in range(rows):
-        first = values[row * cell].reshape(-1)[:width]
-        for i in range(width):
-            band[i] = np.float32(first[i])
-        for y in range(row * cell + 1, (row + 1) * cell):
-            line = values[y].reshape(-1)[:width]
-            for i in range(width):  # whole rows at a time: contiguous, vectorised
-                band[i] += np.float32(line[i])
-        for col in range(cols):
-            for k in range(depth):
-                total = np.float32(0.0)
-                for dx in range(cell):
-                    total += band[(col * cell + dx) * depth + k]
-                out[row, col, k] = total * scale
-
-
 def cell_average(channels: np.ndarray, cell_size: int) -> np.ndarray:
     """Mean over non-overlapping cell x cell blocks from the top-left (average_feature_region).
 
@@ -93,11 +67,11 @@ def cell_average(channels: np.ndarray, cell_size: int) -> np.ndarray:
         if not np.issubdtype(values.dtype, np.number) or np.iscomplexobj(values):
             raise InputError(f"cell_average needs real numbers, got dtype {values.dtype}")
         values = values.astype(np.float32)
-    values = np.ascontiguousarray(values)
     height, width, depth = values.shape
-    out = np.empty((height // cell, width // cell, depth), np.float32)
-    _cell_means(values, cell, out)
-    return out
+    rows, cols = height // cell, width // cell
+    blocks = values[: rows * cell, : cols * cell].astype(np.float32, copy=False)
+    sums = blocks.reshape(rows, cell, cols, cell, depth).sum(axis=(1, 3), dtype=np.float32)
+    return sums * (np.float32(1.0) / np.float32(cell * cell))
 
 
 def is_grey(frame: np.ndarray) -> bool:
@@ -133,65 +107,6 @@ def grey_feature(patch: np.ndarray, cell_size: int) -> np.ndarray:
 # -- colour lookup tables ------------------------------------------------------------------------
 
 
-@njit(cache=True, nogil=True, fastmath=False, error_model="numpy")
-def _band_indices(patch, row, cell, index):
-    """Table rows R//8 + 32 (G//8) + 1024 (B//8) of the pixels of cell row `row`, (cell, width)."""
-    width = index.shape[1]
-    for dy in range(cell):
-        line = patch[row * cell + dy]
-        target = index[dy]
-        for x in range(width):
-            target[x] = (
-                (np.int64(line[x, 0]) >> 3)
-                + ((np.int64(line[x, 1]) >> 3) << 5)
-                + ((np.int64(line[x, 2]) >> 3) << 10)
-            )
-
-
-@njit(cache=True, nogil=True, fastmath=False, error_model="numpy")
-def _lookup_cell_average(patch, table, cell, weights, out):
-    """Cell means of table[R//8 + 32 (G//8) + 1024 (B//8)] over an RGB uint8 patch, each cell's
-    mean times `weights[row, col]` (rounded once after the mean), into `out` of any strides.
-
-    Each cell's sum runs over its pixels row by row, left to right, in float32 from zero; with
-    the tables' 10 channels the ten sums stay in registers (no array views, no stores between
-    the additions)."""
-    rows, cols, depth = out.shape
-    index = np.empty((cell, cols * cell), np.int64)
-    scale = np.float32(1.0) / np.float32(cell * cell)
-    zero = np.float32(0.0)
-    for row in range(rows):
-        _band_indices(patch, row, cell, index)
-        for col in range(cols):
-            weight = weights[row, col]
-            first = col * cell
-            if depth == 10:
-                s0 = s1 = s2 = s3 = s4 = s5 = s6 = s7 = s8 = s9 = zero
-                for dy in range(cell):
-                    for dx in range(first, first + cell):
-                        i = index[dy, dx]
-                        s0 += table[i, 0]
-                        s1 += table[i, 1]
-                        s2 += table[i, 2]
-                        s3 += table[i, 3]
-                        s4 += table[i, 4]
-                        s5 += table[i, 5]
-                        s6 += table[i, 6]
-                        s7 += table[i, 7]
-                        s8 += table[i, 8]
-                        s9 += table[i, 9]
-                sums = (s0, s1, s2, s3, s4, s5, s6, s7, s8, s9)
-                for k in range(10):
-                    out[row, col, k] = (sums[k] * scale) * weight
-            else:
-                for k in range(depth):
-                    total = zero
-                    for dy in range(cell):
-                        for dx in range(first, first + cell):
-                            total += table[index[dy, dx], k]
-                    out[row, col, k] = (total * scale) * weight
-
-
 def _as_rgb_uint8(patch: np.ndarray) -> np.ndarray:
     array = np.asarray(patch)
     if array.ndim != 3 or array.shape[2] != 3:
@@ -204,7 +119,7 @@ def _as_rgb_uint8(patch: np.ndarray) -> np.ndarray:
     return np.ascontiguousarray(array)
 
 
-def _checked_lookup(patch: np.ndarray, table: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def checked_lookup(patch: np.ndarray, table: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """(RGB uint8 C-contiguous patch, float32 C-contiguous table) for `_lookup_cell_average`."""
     rgb = _as_rgb_uint8(patch)
     lookup = np.asarray(table)
@@ -218,10 +133,10 @@ def _checked_lookup(patch: np.ndarray, table: np.ndarray) -> tuple[np.ndarray, n
 def colour_table_feature(patch_rgb_uint8: np.ndarray, table: np.ndarray, cell: int) -> np.ndarray:
     """Cell means of a 32768-row colour table indexed by R//8 + 32*(G//8) + 1024*(B//8)."""
     cell = _check_cell(cell)
-    rgb, lookup = _checked_lookup(patch_rgb_uint8, table)
-    out = np.empty((rgb.shape[0] // cell, rgb.shape[1] // cell, lookup.shape[1]), np.float32)
-    _lookup_cell_average(rgb, lookup, cell, np.ones(out.shape[:2], np.float32), out)
-    return out
+    rgb, lookup = checked_lookup(patch_rgb_uint8, table)
+    index = (rgb[:, :, 0] >> 3) + (rgb[:, :, 1].astype(np.int64) >> 3 << 5)
+    index = index + (rgb[:, :, 2].astype(np.int64) >> 3 << 10)
+    return cell_average(lookup[index], cell)
 
 
 def load_colour_table(path: str | Path) -> np.ndarray:
@@ -299,13 +214,9 @@ def _table_from_mat(file: Path) -> np.ndarray:
 
 @lru_cache(maxsize=1)
 def lab11_table() -> np.ndarray:
-    """`build_lab11_table()`, read-only; kept in the user cache between processes (building it
-    takes ~50 ms of a process's start-up, loading it ~1 ms), keyed by `colour_terms`' source and
-    numpy's version."""
-    key = f"{Path(colour_terms.__file__).read_bytes().hex()} numpy {np.__version__}"
-    table = cached_array("lab11", key, build_lab11_table)
-    if table.shape != (COLOUR_TABLE_ROWS, COLOUR_CHANNELS) or table.dtype != np.float32:
-        table = build_lab11_table()  # a foreign file under our name
+    """`build_lab11_table()`, read-only, built once per process (~50 ms, on the first
+    tracker's first frame); never kept on disk, so no cache file can change a result."""
+    table = build_lab11_table()
     table.flags.writeable = False
     return table
 
@@ -313,9 +224,6 @@ def lab11_table() -> np.ndarray:
 def lab11_colour_feature(patch_rgb_uint8: np.ndarray, cell: int) -> np.ndarray:
     """Our default colour feature: cell means of the 'lab11' lookup -> (H//c, W//c, 10)."""
     return colour_table_feature(patch_rgb_uint8, lab11_table(), cell)
-
-
-lab11_table()  # loaded (or built) once here, at import, so no tracked frame pays for it
 
 
 # -- the stack ----------------------------------------------------------------------------------
@@ -329,7 +237,7 @@ def feature_dim(params: TrackerParams, colour: bool) -> int:
     return channels
 
 
-def _feature_patch(patch: np.ndarray, params: TrackerParams, colour_table) -> np.ndarray:
+def feature_patch(patch: np.ndarray, params: TrackerParams, colour_table) -> np.ndarray:
     """The patch as H x W (grey) or H x W x 3, checked against the enabled features."""
     array = np.asarray(patch)
     if array.ndim == 3 and array.shape[2] == 1:
@@ -351,42 +259,34 @@ def feature_maps(
     params: TrackerParams,
     colour_table: np.ndarray | None,
     window: np.ndarray | None = None,
-    out: np.ndarray | None = None,
 ) -> np.ndarray:
     """The release's feature stack of one patch, channel-first: float32 (K, H//c, W//c).
 
     `patch` is uint8 RGB (H x W x 3) or grey (H x W); a grey patch gets no colour channels.
     Order: grey (1), fHOG (31), colour (10), each when enabled in `params`; colour_feature
-    'table' uses `colour_table` (a 32768-row table, see `load_colour_table`). With a float32
-    `window` (H//c, W//c) every map is times the window, taken in the pass that computes it (a
-    float32 product rounds once wherever it is taken, so these are exactly the maps times the
-    window). Written into `out` (e.g. a transform's input buffer) when given; returned.
+    'table' uses `colour_table` (a 32768-row table, see `load_colour_table`). Every map is times
+    the float32 `window` (H//c, W//c) when one is given.
     """
-    array = _feature_patch(patch, params, colour_table)
+    array = feature_patch(patch, params, colour_table)
     cell = int(params.cell_size)
-    shape = (feature_dim(params, array.ndim == 3), array.shape[0] // cell, array.shape[1] // cell)
-    if window is None:
-        window = np.ones(shape[1:], np.float32)
-    if window.shape != shape[1:] or window.dtype != np.float32:
-        raise InputError(
-            f"the window must be float32 {shape[1:]}, got {window.dtype} {window.shape}"
-        )
-    if out is None:
-        out = np.empty(shape, np.float32)
-    elif out.shape != shape or out.dtype != np.float32:
-        raise InputError(f"feature maps need a float32 {shape} buffer, got {out.dtype} {out.shape}")
-    channel = 0
+    stack = []
     if params.use_grey:
-        np.multiply(grey_feature(array, cell)[:, :, 0], window, out=out[0])
-        channel += GREY_CHANNELS
+        stack.append(grey_feature(array, cell))
     if params.use_fhog:
-        fhog_weighted_into(array, window, out[channel : channel + FHOG_CHANNELS], cell)
-        channel += FHOG_CHANNELS
+        stack.append(fhog(array, cell)[:, :, :FHOG_CHANNELS])
     if array.ndim == 3 and params.colour_feature != "none":
         table = colour_table if params.colour_feature == "table" else lab11_table()
-        rgb, lookup = _checked_lookup(array, table)
-        _lookup_cell_average(rgb, lookup, cell, window, out[channel:].transpose(1, 2, 0))
-    return out
+        stack.append(colour_table_feature(array, table, cell))
+    maps = np.concatenate(stack, axis=2).transpose(2, 0, 1)
+    if window is not None:
+        _check_window(window, maps.shape[1:])
+        maps = maps * window
+    return np.ascontiguousarray(maps, dtype=np.float32)
+
+
+def _check_window(window: np.ndarray, cells: tuple[int, ...]) -> None:
+    if window.shape != cells or window.dtype != np.float32:
+        raise InputError(f"the window must be float32 {cells}, got {window.dtype} {window.shape}")
 
 
 def extract_features(
@@ -401,15 +301,16 @@ def scale_features(patches: np.ndarray, weights: np.ndarray | None = None) -> np
 
     `patches` is (N, h, w) or (N, h, w, 3). Each patch's (h//4, w//4, 31) block is flattened in
     C order (the release uses MATLAB's column-major order; the scale filter only needs one fixed
-    order). With float32 `weights` (N,) sample i is times weights[i] (the scale window), taken in
-    the pass that computes it: exactly the unweighted samples times the weights.
+    order); sample i is times `weights[i]` (the scale window) when weights are given.
     """
     stack = np.asarray(patches)
     if stack.ndim not in (3, 4):
         raise InputError(
             f"scale samples must be N x h x w or N x h x w x 3, got shape {stack.shape}"
         )
-    if weights is None:
-        weights = np.ones(stack.shape[0], np.float32)
-    hog = fhog_batch(stack, SCALE_FEATURE_CELL, sample_weights=weights)
-    return hog.reshape(stack.shape[0], -1)
+    samples = np.stack(
+        [fhog(patch, SCALE_FEATURE_CELL)[:, :, :FHOG_CHANNELS].reshape(-1) for patch in stack]
+    )
+    if weights is not None:
+        samples = samples * np.asarray(weights, np.float32)[:, None]
+    return samples.astype(np.float32, copy=False)

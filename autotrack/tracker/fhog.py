@@ -1,24 +1,16 @@
-"""Felzenszwalb HOG as computed by Piotr Dollar's toolbox `fhog(I, binSize, nOrients, clip)`.
+"""Felzenszwalb HOG as Piotr Dollar's toolbox computes it, `fhog(I, binSize, nOrients, clip)`, in
+vectorised numpy: the reference the compiled `backend.fast_fhog` is tested against.
 
-A port of the semantics of the toolbox's gradientMex.cpp (v3.30: `gradMag`, `gradHist` with
-softBin = -1, `hogNormMatrix`, `hogChannels`, `fhog`), which the AutoTrack release calls as
-`fhog(single(patch), 4, 9)`. dlib's fHOG (`pyfhog`) differs and must not be substituted.
-
-Per pixel (only the first (H//cell)*cell rows and (W//cell)*cell columns are used):
-1. Centred differences (one-sided, factor 1, at the image border); with several channels the one
-   with the largest squared magnitude wins (a later channel only if strictly larger).
-2. The orientation in [0, 2 pi) goes to one of 2 * n_orients bins without orientation
-   interpolation; the magnitude / cell^2 is spread bilinearly over the 4 nearest cells, and the
-   border cells are scaled by 8/7 (they miss 1/8 of the interior weight).
-3. Contrast-insensitive bins are the sums of opposite sensitive bins; each cell is normalised by
-   its four 2 x 2 blocks' energies, clipped at `clip`, and summed into 2n + n orientation
-   channels and 4 texture channels; a last, all-zero channel completes the toolbox's 3n + 5.
-
-Deliberate differences: the toolbox takes the magnitude and the unit gradient from SSE
-`rcp`/`rsqrt` approximations (about 12 correct bits, hardware dependent); here they are exact
-float32. Everything else (acos lookup table, float32 bin arithmetic, block energies and the
-order the normaliser border is filled in) follows the C code, so orientation bins agree except
-where the approximation itself moves a gradient across a bin edge.
+The AutoTrack release calls `fhog(single(patch), 4, 9)`. Per pixel (only the first
+(H//cell)*cell rows and (W//cell)*cell columns are binned):
+1. centred differences (one-sided at the image border); of several channels the one with the
+   largest squared magnitude (the first among equals);
+2. the orientation in [0, 2 pi), from the toolbox's acos table, to one of 2n bins; the
+   magnitude / cell^2 spread bilinearly over the 4 nearest cells; border cells times 8/7;
+3. contrast-insensitive bins = sums of opposite sensitive bins; each cell normalised by its
+   four 2 x 2 blocks' energies, clipped at `clip`, giving 2n + n orientation channels and 4
+   texture channels; a last all-zero channel completes the toolbox's 3n + 5.
+The toolbox's SSE rcp/rsqrt approximations are taken exactly here (float32).
 """
 
 from __future__ import annotations
@@ -27,24 +19,14 @@ import math
 from functools import lru_cache
 
 import numpy as np
-from numba import njit
 
 from autotrack.errors import InputError
-from autotrack.tracker.gradients import (
-    ACOS_OFFSET,
-    ACOS_PAD,
-    ACOS_STEPS,
-    gradient_histogram,
-    planar_float32,
-)
 
-FHOG_TRUNCATION_CHANNELS = 1
-"""The toolbox appends one all-zero truncation channel; trackers drop it."""
-
-_PI = np.float32(3.14159265)  # the toolbox's PI (a float literal)
-_TEXTURE_WEIGHT = np.float32(0.2357)  # ~ 1 / sqrt(18), hogChannels' r
-_HALF = np.float32(0.5)
-_ONE = np.float32(1.0)
+ACOS_STEPS = 10000  # the toolbox's acosTable: a[i] ~= acos(i / 10000)
+ACOS_PAD = 10
+ACOS_OFFSET = ACOS_STEPS + ACOS_PAD
+TOOLBOX_PI = np.float32(3.14159265)  # the toolbox's PI (a float literal)
+TEXTURE_WEIGHT = np.float32(0.2357)  # ~ 1 / sqrt(18), hogChannels' r
 
 
 def fhog_channels(n_orients: int = 9) -> int:
@@ -54,213 +36,107 @@ def fhog_channels(n_orients: int = 9) -> int:
 
 @lru_cache(maxsize=1)
 def acos_table() -> np.ndarray:
-    """The toolbox's acosTable(): float32 acos(i / 10000) for i in [-10010, 10010), read-only.
-
-    Entries below -10000 are pi, above 9999 zero, and values above pi - 1e-6 are clamped to
-    pi - 1e-6 (so that adding pi for negative y-gradients stays below 2 pi). Index with
-    `int(x * 10000) + 10010`.
-    """
+    """The toolbox's acosTable(): float32 acos(i / 10000) for i in [-10010, 10010), read-only;
+    pi below -10000, 0 above 9999, values above pi - 1e-6 clamped there. Index with
+    `int(x * 10000) + 10010`."""
     table = np.empty(2 * ACOS_OFFSET, dtype=np.float32)
     steps = np.arange(-ACOS_STEPS, ACOS_STEPS, dtype=np.float32) / np.float32(ACOS_STEPS)
-    table[:ACOS_PAD] = _PI
+    table[:ACOS_PAD] = TOOLBOX_PI
     table[ACOS_PAD : ACOS_PAD + 2 * ACOS_STEPS] = np.arccos(steps.astype(np.float64))
     table[ACOS_PAD + 2 * ACOS_STEPS :] = 0.0
-    limit = _PI - np.float32(1e-6)
+    limit = TOOLBOX_PI - np.float32(1e-6)
     head = table[: ACOS_OFFSET + ACOS_STEPS // 10]
     head[head > limit] = limit
     table.flags.writeable = False
     return table
 
 
-@njit(cache=True, nogil=True, fastmath=False, error_model="numpy")
-def _orientation_bin_table(table, n_bins, bins):
-    """bins[i] and bins[len(table) + i]: gradHist's bin of the angle table[i], and of
-    table[i] + pi (a negative y-gradient), in its float32 arithmetic."""
-    bins_per_radian = np.float32(n_bins) / (np.float32(2.0) * _PI)
-    for i in range(bins.size):
-        angle = table[i % table.size] + (_PI if i >= table.size else np.float32(0.0))
-        bin_index = int(angle * bins_per_radian + _HALF)
-        bins[i] = 0 if bin_index >= n_bins else bin_index
+def gradients(image: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(gx, gy) of the strongest channel per pixel: centred differences, one-sided at borders."""
+    pixels = np.asarray(image, dtype=np.float32)
+    pixels = pixels[:, :, None] if pixels.ndim == 2 else pixels
+    gx, gy = np.empty_like(pixels), np.empty_like(pixels)
+    for gradient, axis in ((gx, 1), (gy, 0)):
+        ahead = np.take(pixels, range(2, pixels.shape[axis]), axis)
+        behind = np.take(pixels, range(pixels.shape[axis] - 2), axis)
+        middle = [slice(None)] * 3
+        middle[axis] = slice(1, -1)
+        gradient[tuple(middle)] = (ahead - behind) * np.float32(0.5)
+        for end, (a, b) in ((0, (1, 0)), (-1, (-1, -2))):
+            edge = [slice(None)] * 3
+            edge[axis] = end
+            gradient[tuple(edge)] = np.take(pixels, a, axis) - np.take(pixels, b, axis)
+    strongest = np.argmax(gx * gx + gy * gy, axis=2)[:, :, None]  # first among equals
+    return np.take_along_axis(gx, strongest, 2)[:, :, 0], np.take_along_axis(gy, strongest, 2)[
+        :, :, 0
+    ]
 
 
-@lru_cache(maxsize=8)
-def orientation_bins(n_orients: int) -> np.ndarray:
-    """The contrast-sensitive bin (of 2 n_orients) of each acos-table entry, read-only: entry
-    i for a non-negative y-gradient, len(acos_table()) + i for a negative one. The per-pixel
-    angle arithmetic done once per entry: the kernel reads a byte instead."""
-    bins = np.empty(4 * ACOS_OFFSET, np.uint8 if n_orients <= 127 else np.int64)
-    _orientation_bin_table(acos_table(), 2 * n_orients, bins)
-    bins.flags.writeable = False
-    return bins
+def orientation_bins(gx: np.ndarray, gy: np.ndarray, n_bins: int) -> np.ndarray:
+    """gradHist's hard orientation bin (of `n_bins` over [0, 2 pi)) per pixel, in float32."""
+    magnitude = np.sqrt(gx * gx + gy * gy)
+    with np.errstate(divide="ignore"):
+        inverse = np.minimum(np.float32(1.0) / magnitude, np.float32(1e10))
+    cosine = gx * inverse * np.float32(ACOS_STEPS)
+    cosine = np.where(gy < 0, -cosine, cosine)
+    angle = acos_table()[cosine.astype(np.int64) + ACOS_OFFSET]
+    angle = np.where(gy < 0, angle + TOOLBOX_PI, angle)
+    per_radian = np.float32(n_bins) / (np.float32(2.0) * TOOLBOX_PI)
+    index = (angle * per_radian + np.float32(0.5)).astype(np.int64)
+    return np.where(index >= n_bins, 0, index)
 
 
-@njit(cache=True, nogil=True, fastmath=False, error_model="numpy")
-def _block_normalisers(insensitive, cell):
-    """hogNormMatrix: 1/sqrt(2x2 block energy + eps) on an (hb+1, wb+1) grid, border copied.
+def _bilinear_weights(pixels: int, cell: int) -> np.ndarray:
+    """(pixels, cells) weights of each pixel's two nearest cells along one axis."""
+    cells = pixels // cell
+    position = (np.arange(pixels) + 0.5) / cell - 0.5
+    first = np.floor(position).astype(np.int64)
+    weights = np.zeros((pixels, cells + 2))
+    weights[np.arange(pixels), first + 1] = 1.0 - (position - first)
+    weights[np.arange(pixels), first + 2] = position - first
+    return weights[:, 1 : cells + 1]
 
-    Entry [i+1, j+1] belongs to the block whose top-left cell is (i, j). The border is filled in
-    the C code's order, which matters only when hb or wb is 1 (then raw energies leak through,
-    as in the toolbox).
-    """
-    n_orients, hb, wb = insensitive.shape
-    norm = np.zeros((hb + 1, wb + 1), np.float32)
-    for o in range(n_orients):
-        for y in range(hb):
-            for x in range(wb):
-                value = insensitive[o, y, x]
-                norm[y + 1, x + 1] += value * value
-    eps = np.float32(1e-4) / np.float32(4.0)
-    for _ in range(4):
-        eps = eps / np.float32(cell)
-    for x in range(wb - 1):
-        for y in range(hb - 1):
-            total = (
-                norm[y + 1, x + 1] + norm[y + 2, x + 1] + norm[y + 1, x + 2] + norm[y + 2, x + 2]
-            ) + eps
-            norm[y + 1, x + 1] = _ONE / np.float32(math.sqrt(total))
-    last_x, last_y = wb, hb
+
+def orientation_histogram(image: np.ndarray, cell: int, n_bins: int) -> np.ndarray:
+    """(H//cell, W//cell, n_bins) cell histograms of gradient magnitude / cell^2 (gradHist)."""
+    gx, gy = gradients(image)
+    rows, cols = (gx.shape[0] // cell) * cell, (gx.shape[1] // cell) * cell
+    gx, gy = gx[:rows, :cols], gy[:rows, :cols]
+    magnitude = np.sqrt(gx * gx + gy * gy).astype(np.float64) / cell**2
+    votes = np.zeros((rows, cols, n_bins))
+    np.put_along_axis(votes, orientation_bins(gx, gy, n_bins)[:, :, None], magnitude[:, :, None], 2)
+    by_row = np.tensordot(_bilinear_weights(rows, cell), votes, axes=(0, 0))
+    histogram = np.einsum("ixo,xj->ijo", by_row, _bilinear_weights(cols, cell))
+    gain = np.ones(histogram.shape[:2])
+    for border in (np.s_[0, :], np.s_[-1, :], np.s_[:, 0], np.s_[:, -1]):
+        gain[border] *= 8.0 / 7.0
+    return histogram * gain[:, :, None]
+
+
+def block_normalisers(energy: np.ndarray, cell: int) -> np.ndarray:
+    """hogNormMatrix: 1 / sqrt(2 x 2 block energy + eps) on an (hb+1, wb+1) grid; entry
+    [i+1, j+1] is the block with top-left cell (i, j); the border filled in the C code's order
+    (which matters only for one cell row or column: raw energies then leak, as there)."""
+    hb, wb = energy.shape
+    norm = np.zeros((hb + 1, wb + 1))
+    norm[1:, 1:] = energy
+    eps = 1e-4 / 4.0 / cell**4
+    blocks = energy[:-1, :-1] + energy[1:, :-1] + energy[:-1, 1:] + energy[1:, 1:]
+    norm[1:hb, 1:wb] = 1.0 / np.sqrt(blocks + eps)
     norm[0, 0] = norm[1, 1]
-    for y in range(hb + 1):
-        norm[y, 0] = norm[y, 1]
-    norm[last_y, 0] = norm[last_y - 1, 1]
-    norm[0, last_x] = norm[1, last_x - 1]
-    for y in range(hb + 1):
-        norm[y, last_x] = norm[y, last_x - 1]
-    norm[last_y, last_x] = norm[last_y - 1, last_x - 1]
-    for x in range(wb + 1):
-        norm[0, x] = norm[1, x]
-    for x in range(wb + 1):
-        norm[last_y, x] = norm[last_y - 1, x]
+    norm[:, 0] = norm[:, 1]
+    norm[hb, 0] = norm[hb - 1, 1]
+    norm[0, wb] = norm[1, wb - 1]
+    norm[:, wb] = norm[:, wb - 1]
+    norm[hb, wb] = norm[hb - 1, wb - 1]
+    norm[0, :] = norm[1, :]
+    norm[hb, :] = norm[hb - 1, :]
     return norm
 
 
-@njit(cache=True, nogil=True, fastmath=False, error_model="numpy")
-def _cell_factors(norm, factors, first):
-    """The four block normalisers of each cell of one image (`_block_normalisers`' grid) as
-    cell-aligned planes, into columns first.. of `factors` (4, hb, columns): hogChannels'
-    GETT(0), (1), (hb1), (hb1+1), the blocks at (y+1, x+1), (y, x+1), (y+1, x) and (y, x)."""
-    hb, wb = norm.shape[0] - 1, norm.shape[1] - 1
-    for y in range(hb):
-        for x in range(wb):
-            factors[0, y, first + x] = norm[y + 1, x + 1]
-            factors[1, y, first + x] = norm[y, x + 1]
-            factors[2, y, first + x] = norm[y + 1, x]
-            factors[3, y, first + x] = norm[y, x]
-
-
-@njit(cache=True, nogil=True, fastmath=False, error_model="numpy")
-def _normalised_channels(by_channel, n_orients, factors, clip, weights, out):
-    """hogChannels on the 2n sensitive and n insensitive bins of `by_channel` (3n, hb, cols),
-    each cell's four normalisers in `factors` (4, hb, cols): the mean of a cell's value under
-    them, each clipped, times `weights[y, x]`, into `out[o]`, and the 4 texture channels (the
-    clipped sensitive values times the texture weight, summed over the orientations in the
-    toolbox's order) into `out[3n:3n+4]`. Whole cell rows at a time, one channel after
-    another, with plain indexing (no views: a view per row costs reference counting); the
-    columns may be several images' cells side by side."""
-    n_bins = 2 * n_orients
-    hb, cols = by_channel.shape[1], by_channel.shape[2]
-    texture_first = 3 * n_orients
-    sums = np.empty((4, cols), np.float32)
-    for y in range(hb):
-        for k in range(4):
-            for x in range(cols):
-                sums[k, x] = 0.0
-        for o in range(n_bins + n_orients):
-            texture = o < n_bins
-            for x in range(cols):
-                r = by_channel[o, y, x]
-                t0 = min(r * factors[0, y, x], clip)
-                t1 = min(r * factors[1, y, x], clip)
-                t2 = min(r * factors[2, y, x], clip)
-                t3 = min(r * factors[3, y, x], clip)
-                out[o, y, x] = (t0 * _HALF + t1 * _HALF + t2 * _HALF + t3 * _HALF) * weights[y, x]
-                if texture:
-                    sums[0, x] += t0 * _TEXTURE_WEIGHT
-                    sums[1, x] += t1 * _TEXTURE_WEIGHT
-                    sums[2, x] += t2 * _TEXTURE_WEIGHT
-                    sums[3, x] += t3 * _TEXTURE_WEIGHT
-        for k in range(4):
-            for x in range(cols):
-                out[texture_first + k, y, x] = sums[k, x] * weights[y, x]
-
-
-@njit(cache=True, nogil=True, fastmath=False, error_model="numpy", inline="always")
-def _insensitive_sums(by_channel, n_orients):
-    """The n contrast-insensitive bins, the sums of opposite sensitive ones, into
-    `by_channel[2n:3n]`."""
-    for o in range(n_orients):
-        for y in range(by_channel.shape[1]):
-            for x in range(by_channel.shape[2]):
-                by_channel[2 * n_orients + o, y, x] = (
-                    by_channel[o, y, x] + by_channel[o + n_orients, y, x]
-                )
-
-
-@njit(cache=True, nogil=True, fastmath=False, error_model="numpy")
-def _fhog_into(image, cell, n_orients, clip, bins, weights, out):
-    """fhog of one (H, W, C) image, each cell's values times `weights[y, x]`, into `out`
-    (>= 3n+4, H//cell, W//cell), channel-first, any strides (a channel-first slice of a
-    transform's input buffer, or a transposed view of a channel-last array); channels past
-    3n+4 (the toolbox's zero channel) are left as they are.
-
-    A float32 product rounds once wherever it is taken, so `out` holds exactly what the
-    unweighted features times the weights would give (weights of one give the features).
-    """
-    hb, wb = out.shape[1], out.shape[2]
-    if hb == 0 or wb == 0:
-        return
-    # The 2n sensitive bins then the n insensitive ones, channel-major (one plane per bin).
-    bins_by_channel = np.zeros((3 * n_orients, hb, wb), np.float32)
-    planes = planar_float32(image)
-    gradient_histogram(planes, cell, 2 * n_orients, bins, bins_by_channel, planes.shape[2], wb)
-    _insensitive_sums(bins_by_channel, n_orients)
-    factors = np.empty((4, hb, wb), np.float32)
-    _cell_factors(_block_normalisers(bins_by_channel[2 * n_orients :], cell), factors, 0)
-    _normalised_channels(bins_by_channel, n_orients, factors, clip, weights, out)
-
-
-@njit(cache=True, nogil=True, fastmath=False, error_model="numpy")
-def _fhog_batch_into(images, cell, n_orients, clip, bins, sample_weights, out):
-    """`_fhog_into` of each image into `out` (N, H//cell, W//cell, C), channel-last, all of
-    image i's values times `sample_weights[i]` (channels `_fhog_into` leaves stay zero).
-
-    The images are taken side by side, as one image N times as wide whose every image keeps
-    its own borders (`_gradient_histogram`), and normalised side by side too (each image's
-    block normalisers its own): the scale filter's 22 x 22 samples gave rows of 20 pixels and
-    5 cells."""
-    count, rows, cols, channels = out.shape
-    if count == 0 or rows == 0 or cols == 0:
-        out[:] = 0.0
-        return
-    height, width, colours = images.shape[1], images.shape[2], images.shape[3]
-    planes = np.empty((colours, height, count * width), np.float32)
-    for i in range(count):
-        sample = planar_float32(images[i])
-        for c in range(colours):
-            for y in range(height):
-                for x in range(width):
-                    planes[c, y, i * width + x] = sample[c, y, x]
-    side_by_side = np.zeros((3 * n_orients, rows, count * cols), np.float32)
-    gradient_histogram(planes, cell, 2 * n_orients, bins, side_by_side, width, cols)
-    _insensitive_sums(side_by_side, n_orients)
-    factors = np.empty((4, rows, count * cols), np.float32)
-    weights = np.empty((rows, count * cols), np.float32)
-    for i in range(count):
-        own = side_by_side[2 * n_orients :, :, i * cols : (i + 1) * cols]
-        _cell_factors(_block_normalisers(own, cell), factors, i * cols)
-        weights[:, i * cols : (i + 1) * cols] = sample_weights[i]
-    channel_first = np.zeros((channels, rows, count * cols), np.float32)
-    _normalised_channels(side_by_side, n_orients, factors, clip, weights, channel_first)
-    for i in range(count):
-        target = out[i]
-        for y in range(rows):
-            for x in range(cols):
-                for c in range(channels):
-                    target[y, x, c] = channel_first[c, y, i * cols + x]
-
-
-def _as_kernel_input(images: np.ndarray, image_axes: int) -> np.ndarray:
-    """C-contiguous uint8 or float32 with an explicit channel axis (the kernels' two dtypes)."""
+def checked_images(images: np.ndarray, image_axes: int) -> np.ndarray:
+    """`images` ((..., H, W) with `image_axes` = 2 or 3 axes, or with a channel axis) as
+    C-contiguous uint8 or float32 with an explicit channel axis; InputError otherwise."""
     array = np.asarray(images)
     if array.dtype != np.uint8:
         if not (np.issubdtype(array.dtype, np.number) or array.dtype == np.bool_):
@@ -280,7 +156,8 @@ def _as_kernel_input(images: np.ndarray, image_axes: int) -> np.ndarray:
     return np.ascontiguousarray(array)
 
 
-def _check_settings(cell_size: int, n_orients: int, clip: float) -> None:
+def check_settings(cell_size: int, n_orients: int, clip: float) -> None:
+    """InputError unless the cell and orientation count are positive integers, clip positive."""
     if int(cell_size) != cell_size or cell_size < 1:
         raise InputError(f"fhog cell_size must be a positive integer, got {cell_size}")
     if int(n_orients) != n_orients or n_orients < 1:
@@ -292,88 +169,23 @@ def _check_settings(cell_size: int, n_orients: int, clip: float) -> None:
 def fhog(
     image: np.ndarray, cell_size: int = 4, n_orients: int = 9, clip: float = 0.2
 ) -> np.ndarray:
-    """Piotr Dollar's `fhog(single(image), cell_size, n_orients, clip)`.
-
-    `image` is H x W or H x W x C of any real dtype, used as float32 on its own scale (0..255 for
-    8-bit images; do not divide by 255). Returns float32 (H//cell, W//cell, 3n+5) in the
-    toolbox's channel order: 2n contrast-sensitive orientations, n contrast-insensitive ones, 4
-    texture (block energy) channels and one all-zero channel that callers drop.
-    """
-    _check_settings(cell_size, n_orients, clip)
-    pixels = _as_kernel_input(image, 2)
-    height, width = pixels.shape[:2]
-    out = np.zeros(
-        (height // cell_size, width // cell_size, fhog_channels(n_orients)), dtype=np.float32
-    )
-    weights = np.ones(out.shape[:2], np.float32)
-    bins = orientation_bins(int(n_orients))
-    _fhog_into(
-        pixels,
-        int(cell_size),
-        int(n_orients),
-        np.float32(clip),
-        bins,
-        weights,
-        out.transpose(2, 0, 1),
-    )
-    return out
-
-
-def fhog_weighted_into(
-    image: np.ndarray,
-    weights: np.ndarray,
-    out: np.ndarray,
-    cell_size: int = 4,
-    n_orients: int = 9,
-    clip: float = 0.2,
-) -> None:
-    """`fhog(image, ...)` times float32 `weights` (H//cell, W//cell), written channel-first into
-    `out` (3n+4, H//cell, W//cell), any strides, without the zero channel: a slice of a
-    transform's input buffer takes the windowed features in the same pass, exactly the values
-    `fhog(image)[..., :3n+4].transpose(2, 0, 1) * weights` has."""
-    _check_settings(cell_size, n_orients, clip)
-    pixels = _as_kernel_input(image, 2)
-    cells = (pixels.shape[0] // cell_size, pixels.shape[1] // cell_size)
-    shape = (fhog_channels(n_orients) - 1, *cells)
-    if weights.shape != cells or out.shape != shape:
-        raise InputError(
-            f"fhog of a {pixels.shape[0]} x {pixels.shape[1]} image at cell {cell_size} needs "
-            f"weights {cells} and out {shape}, got {weights.shape} and {out.shape}"
-        )
-    bins = orientation_bins(int(n_orients))
-    _fhog_into(pixels, int(cell_size), int(n_orients), np.float32(clip), bins, weights, out)
-
-
-def fhog_batch(
-    images: np.ndarray,
-    cell_size: int = 4,
-    n_orients: int = 9,
-    clip: float = 0.2,
-    sample_weights: np.ndarray | None = None,
-) -> np.ndarray:
-    """`fhog` of each image of an (N, H, W) or (N, H, W, C) stack -> (N, H//cell, W//cell, 3n+5).
-
-    With `sample_weights` (N,) the result is (N, H//cell, W//cell, 3n+4), without the zero
-    channel, and image i's values are times `sample_weights[i]` (float32, rounded once: exactly
-    the unweighted features times the weight).
-    """
-    _check_settings(cell_size, n_orients, clip)
-    stack = np.asarray(images)
-    if stack.ndim not in (3, 4):
-        raise InputError(
-            f"fhog_batch needs a stack of shape N x H x W or N x H x W x C, got {stack.shape}"
-        )
-    pixels = _as_kernel_input(stack, 3)
-    count, height, width = pixels.shape[:3]
-    channels = fhog_channels(n_orients)
-    if sample_weights is None:
-        weights = np.ones(count, np.float32)
-    else:
-        weights = np.ascontiguousarray(sample_weights, dtype=np.float32)
-        if weights.shape != (count,):
-            raise InputError(f"fhog_batch needs {count} sample weights, got {weights.shape}")
-        channels -= FHOG_TRUNCATION_CHANNELS
-    out = np.empty((count, height // cell_size, width // cell_size, channels), np.float32)
-    bins = orientation_bins(int(n_orients))
-    _fhog_batch_into(pixels, int(cell_size), int(n_orients), np.float32(clip), bins, weights, out)
+    """Piotr Dollar's `fhog(single(image), cell_size, n_orients, clip)`: float32 (H//cell,
+    W//cell, 3n+5): 2n contrast-sensitive orientations, n insensitive, 4 texture channels and
+    one all-zero channel (which the tracker drops). `image` is H x W or H x W x C on its own
+    scale (0..255 for 8-bit images)."""
+    check_settings(cell_size, n_orients, clip)
+    pixels = checked_images(image, 2)
+    hb, wb = pixels.shape[0] // cell_size, pixels.shape[1] // cell_size
+    out = np.zeros((hb, wb, fhog_channels(n_orients)), np.float32)
+    if hb == 0 or wb == 0:
+        return out
+    sensitive = orientation_histogram(pixels, cell_size, 2 * n_orients)
+    insensitive = sensitive[:, :, :n_orients] + sensitive[:, :, n_orients:]
+    norm = block_normalisers(np.sum(insensitive**2, axis=2), cell_size)
+    blocks = [norm[1:, 1:], norm[:-1, 1:], norm[1:, :-1], norm[:-1, :-1]]  # hogChannels' four
+    bins = np.concatenate([sensitive, insensitive], axis=2)
+    clipped = np.stack([np.minimum(bins * b[:, :, None], clip) for b in blocks])  # (4, hb, wb, 3n)
+    out[:, :, : 3 * n_orients] = 0.5 * clipped.sum(axis=0)
+    texture = TEXTURE_WEIGHT * clipped[:, :, :, : 2 * n_orients].sum(axis=3)
+    out[:, :, 3 * n_orients : 3 * n_orients + 4] = texture.transpose(1, 2, 0)
     return out

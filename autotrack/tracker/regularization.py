@@ -6,7 +6,6 @@ import math
 from collections.abc import Callable
 
 import numpy as np
-from numba import njit
 
 from autotrack.tracker.dcf import half_spectrum_weights
 
@@ -50,45 +49,13 @@ def local_variation(
 
     Each map is circularly shifted by its own integer peak displacement so the two peaks
     coincide; Pi = |R_t - R_{t-1}| / |R_{t-1}| elementwise. Division by a near-zero response
-    gives inf/NaN entries, which the caller must treat (they make the frame aberrant).
-    Computed in one compiled pass: numpy's `np.abs(a - b) / np.abs(b)` on the two maps rolled
-    as `centred_alignment` rolls them, bit for bit (float32 maps give float32 arithmetic).
+    gives inf/NaN entries, which the caller must treat (they make the frame aberrant). float32.
     """
-    shift, previous_shift = _centring_shifts(response.shape, displacement, previous_displacement)
-    variation = np.empty(response.shape, np.float32)
-    _centred_variation(response, previous_response, *shift, *previous_shift, variation)
-    return variation
-
-
-@njit(cache=True, nogil=True, fastmath=False, error_model="numpy")
-def _centred_variation(response, previous, shift_r, shift_c, previous_r, previous_c, out):
-    """out = |roll(response) - roll(previous)| / |roll(previous)|, each map rolled by its own
-    (rows, cols) shift as np.roll does (out[i] = map[(i - shift) mod n])."""
-    rows, cols = response.shape
-    shift_c, previous_c = shift_c % cols, previous_c % cols
-    for r in range(rows):
-        values = response[(r - shift_r) % rows]
-        befores = previous[(r - previous_r) % rows]
-        for c in range(cols):
-            column = c - shift_c if c >= shift_c else c - shift_c + cols
-            previous_column = c - previous_c if c >= previous_c else c - previous_c + cols
-            value, before = values[column], befores[previous_column]
-            out[r, c] = abs(value - before) / abs(before)
-
-
-def _centring_shifts(
-    shape: tuple[int, ...],
-    displacement: tuple[float, float],
-    previous_displacement: tuple[float, float],
-) -> tuple[tuple[int, int], tuple[int, int]]:
-    """The (rows, cols) roll of each map that puts both peaks at the centre (eq. 2)."""
-    centre = (shape[0] // 2, shape[1] // 2)
-    shift = (centre[0] - math.floor(displacement[0]), centre[1] - math.floor(displacement[1]))
-    previous_shift = (
-        centre[0] - math.floor(previous_displacement[0]),
-        centre[1] - math.floor(previous_displacement[1]),
+    current, previous = centred_alignment(
+        response, displacement, previous_response, previous_displacement
     )
-    return shift, previous_shift
+    with np.errstate(divide="ignore", invalid="ignore"):
+        return (np.abs(current - previous) / np.abs(previous)).astype(np.float32, copy=False)
 
 
 def centred_alignment(
@@ -98,193 +65,22 @@ def centred_alignment(
     previous_displacement: tuple[float, float],
 ) -> tuple[np.ndarray, np.ndarray]:
     """Both maps circularly shifted by minus their floored peak and then by half the map, so the
-    peaks meet at the centre: one roll per map instead of aligning first and centring the
-    variation after (element-wise maths commutes with the shift, so Pi is the same bit for bit).
-    """
-    shift, previous_shift = _centring_shifts(response.shape, displacement, previous_displacement)
-    return (
-        np.roll(response, shift, axis=(0, 1)),
-        np.roll(previous_response, previous_shift, axis=(0, 1)),
-    )
+    peaks meet at the centre (eq. 2's alignment, and the release's centring, in one roll)."""
+    centre = (response.shape[0] // 2, response.shape[1] // 2)
+
+    def roll(values: np.ndarray, peak: tuple[float, float]) -> np.ndarray:
+        shift = (centre[0] - math.floor(peak[0]), centre[1] - math.floor(peak[1]))
+        return np.roll(values, shift, axis=(0, 1))
+
+    return roll(response, displacement), roll(previous_response, previous_displacement)
 
 
 def global_variation(variation: np.ndarray) -> float:
-    """Global variation eta = ||Pi||_2 * 1e-4, with MATLAB's matrix 2-norm (largest singular value).
-
-    Returns inf when Pi has non-finite entries (a numerical blow-up counts as an aberrance).
-    The norm is `spectral_norm`'s, within a few units in the last place of LAPACK's singular
-    value (tests/test_update_glue.py): eta reaches the filter only through float32 penalties
-    and the test against phi, so the tracking is the same.
-    """
-    return spectral_norm(variation) * GLOBAL_VARIATION_SCALE
-
-
-@njit(cache=True, nogil=True, fastmath=False, error_model="numpy")
-def spectral_norm(matrix):
-    """Largest singular value of a real matrix in float64 (inf if any entry is not finite).
-
-    sqrt of the largest eigenvalue of the Gram matrix: Householder tridiagonalisation, then
-    Sturm-sequence multisection (LAPACK's dstebz counting, eight points a pass). Within
-    ~2e-15 relative of LAPACK's gesdd on the trackers' 50 x 50 variation maps, at a third of
-    its time (~45 against ~130 us plus numpy's wrapper, `np.linalg.svd(compute_uv=False)`,
-    which a frame of four targets called four times).
-    """
-    rows, cols = matrix.shape
-    for r in range(rows):
-        for c in range(cols):
-            if not math.isfinite(matrix[r, c]):
-                return math.inf
-    if rows == 0 or cols == 0:
-        return 0.0
-    gram = _gram_matrix(matrix)
-    size = gram.shape[0]
-    diagonal = np.empty(size)
-    off_diagonal = np.zeros(size)
-    _tridiagonalise(gram, diagonal, off_diagonal)
-    return math.sqrt(max(_largest_tridiagonal_eigenvalue(diagonal, off_diagonal), 0.0))
-
-
-@njit(cache=True, nogil=True, fastmath=False, error_model="numpy", inline="always")
-def _gram_matrix(matrix):
-    """float64 A^T A, or A A^T when A is wide (the smaller of the two), in full."""
-    rows, cols = matrix.shape
-    wide = cols > rows
-    size, count = (rows, cols) if wide else (cols, rows)
-    vectors = np.empty((count, size))  # the Gram matrix's index along each contiguous row
-    for r in range(rows):
-        for c in range(cols):
-            if wide:
-                vectors[c, r] = np.float64(matrix[r, c])
-            else:
-                vectors[r, c] = np.float64(matrix[r, c])
-    gram = np.zeros((size, size))
-    for k in range(0, count - 1, 2):  # two outer products a pass: half the row traffic
-        first, second = vectors[k], vectors[k + 1]
-        for i in range(size):
-            row, a, b = gram[i], first[i], second[i]
-            for j in range(size):
-                row[j] += a * first[j] + b * second[j]
-    if count % 2 == 1:
-        last = vectors[count - 1]
-        for i in range(size):
-            row, a = gram[i], last[i]
-            for j in range(size):
-                row[j] += a * last[j]
-    return gram
-
-
-@njit(cache=True, nogil=True, fastmath=False, error_model="numpy", inline="always")
-def _tridiagonalise(gram, diagonal, off_diagonal):
-    """Householder reduction of a symmetric matrix (overwritten) to tridiagonal form.
-
-    Every loop runs over views from index 0, so the compiler vectorises it (no negative-index
-    handling); the product with the reflector is taken column by column (axpy form).
-    """
-    size = gram.shape[0]
-    reflector_buffer = np.empty(size)
-    product_buffer = np.empty(size)
-    for k in range(size - 2):
-        start = k + 1
-        length = size - start
-        column = gram[k, start:]  # symmetric: row k is column k
-        alpha = column[0]
-        tail = 0.0
-        for i in range(1, length):
-            tail += column[i] * column[i]
-        if tail == 0.0:
-            off_diagonal[k] = alpha
-            continue
-        norm = math.sqrt(alpha * alpha + tail)
-        beta = -norm if alpha >= 0.0 else norm
-        off_diagonal[k] = beta
-        tau = (beta - alpha) / beta
-        reflector = reflector_buffer[:length]  # v with v[0] = 1: H = I - tau v v^T
-        product = product_buffer[:length]
-        reflector[0] = 1.0
-        pivot = alpha - beta
-        for i in range(1, length):
-            reflector[i] = column[i] / pivot
-        for i in range(length):
-            product[i] = 0.0
-        for j in range(length):
-            row, weight = gram[start + j, start:], tau * reflector[j]
-            for i in range(length):
-                product[i] += weight * row[i]
-        dot = 0.0
-        for i in range(length):
-            dot += product[i] * reflector[i]
-        half = 0.5 * tau * dot
-        for i in range(length):
-            product[i] -= half * reflector[i]
-        for i in range(length):  # A -= v w^T + w v^T
-            row, v_i, w_i = gram[start + i, start:], reflector[i], product[i]
-            for j in range(length):
-                row[j] -= v_i * product[j] + w_i * reflector[j]
-    for i in range(size):
-        diagonal[i] = gram[i, i]
-    if size >= 2:
-        off_diagonal[size - 2] = gram[size - 1, size - 2]
-
-
-_SECTION_POINTS = 8
-"""Points of the bracket tested per multisection pass (vectorised across them)."""
-_PIVOT_MINIMUM = 1e-300
-
-
-@njit(cache=True, nogil=True, fastmath=False, error_model="numpy", inline="always")
-def _largest_tridiagonal_eigenvalue(diagonal, off_diagonal):
-    """Largest eigenvalue of a symmetric tridiagonal matrix to the last bit of its bracket.
-
-    The bracket starts at [max diagonal, Gershgorin's bound]; each pass counts the eigenvalues
-    below eight points at once (LDL^T pivots' signs) and keeps the sub-interval holding the
-    largest, then bisects once the points no longer fit between the ends.
-    """
-    size = diagonal.size
-    low = -math.inf
-    high = -math.inf
-    for i in range(size):
-        radius = (abs(off_diagonal[i - 1]) if i > 0 else 0.0) + (
-            abs(off_diagonal[i]) if i < size - 1 else 0.0
-        )
-        high = max(high, diagonal[i] + radius)
-        low = max(low, diagonal[i])
-    squared = np.empty(size)
-    for i in range(size - 1):
-        squared[i] = off_diagonal[i] * off_diagonal[i]
-    points = np.empty(_SECTION_POINTS)
-    pivots = np.empty(_SECTION_POINTS)
-    below = np.empty(_SECTION_POINTS, np.int64)
-    while True:
-        step = (high - low) / (_SECTION_POINTS + 1)
-        for lane in range(_SECTION_POINTS):
-            points[lane] = low + step * (lane + 1)
-        if not (points[0] > low and points[_SECTION_POINTS - 1] < high):
-            middle = 0.5 * (low + high)
-            if middle <= low or middle >= high:
-                return high
-            for lane in range(_SECTION_POINTS):
-                points[lane] = middle
-        for lane in range(_SECTION_POINTS):
-            pivot = diagonal[0] - points[lane]
-            if abs(pivot) < _PIVOT_MINIMUM:
-                pivot = -_PIVOT_MINIMUM
-            pivots[lane] = pivot
-            below[lane] = 1 if pivot < 0.0 else 0
-        for i in range(1, size):
-            value, coupling = diagonal[i], squared[i - 1]
-            for lane in range(_SECTION_POINTS):
-                pivot = value - points[lane] - coupling / pivots[lane]
-                if abs(pivot) < _PIVOT_MINIMUM:
-                    pivot = -_PIVOT_MINIMUM
-                pivots[lane] = pivot
-                below[lane] += 1 if pivot < 0.0 else 0
-        new_low, new_high = low, high
-        for lane in range(_SECTION_POINTS):
-            if below[lane] == size:  # every eigenvalue lies below this point
-                new_high = min(new_high, points[lane])
-            else:
-                new_low = max(new_low, points[lane])
-        low, high = new_low, new_high
+    """Global variation eta = ||Pi||_2 * 1e-4 (eq. 2), with MATLAB's matrix 2-norm (the largest
+    singular value); inf when Pi has non-finite entries (a blow-up counts as an aberrance)."""
+    if not np.isfinite(variation).all():
+        return math.inf
+    return float(np.linalg.norm(variation.astype(np.float64), ord=2)) * GLOBAL_VARIATION_SCALE
 
 
 def temporal_reference(eta: float, zeta: float, nu: float) -> float:

@@ -12,13 +12,6 @@ import math
 import cv2
 import numpy as np
 
-from autotrack.tracker.area_resample import (
-    area_path_is_generic,
-    area_paths_are_generic,
-    area_resize_crop,
-    area_resize_crops,
-)
-
 
 def resize_auto(patch: np.ndarray, size_hw: tuple[int, int]) -> np.ndarray:
     """Resize to (rows, cols): INTER_AREA when the area shrinks, INTER_LINEAR otherwise."""
@@ -69,32 +62,7 @@ def search_patch(
     output_size_hw: tuple[int, int],
 ) -> np.ndarray:
     """The search region around `position` resampled to the filter's fixed patch size."""
-    region = (max(int(region_size_hw[0]), 1), max(int(region_size_hw[1]), 1))
-    output = (int(output_size_hw[0]), int(output_size_hw[1]))
-    if area_path_is_generic(region, output):  # OpenCV's generic area shrink, computed exactly
-        top = math.floor(position[0]) - region[0] // 2
-        left = math.floor(position[1]) - region[1] // 2
-        return area_resize_crop(image, top, left, region, output)
-    patch = crop_replicate(image, position, region_size_hw)
-    return resize_auto(patch, output_size_hw)  # cv2 reads the strided view, no copy
-
-
-def scale_patches(
-    image: np.ndarray,
-    position: tuple[float, float],
-    base_target_size_hw: np.ndarray,
-    scale_factors: np.ndarray,
-    model_size_hw: tuple[int, int],
-) -> np.ndarray:
-    """Patches of the target at each scale, resized to the scale model size: (N, rows, cols[, 3]).
-
-    Each sample equals `resize_auto(crop_replicate(...))`; the ones OpenCV shrinks with its
-    generic area tables (nearly all) are computed together by `area_resample`, bit for bit.
-    """
-    factors = np.asarray(scale_factors, dtype=np.float64)
-    base = np.asarray(base_target_size_hw, dtype=np.float64)
-    sizes = np.maximum(np.floor(base[None, :] * factors[:, None]), 2).astype(np.int64)
-    return sized_patches(image, position, sizes, model_size_hw)
+    return resize_auto(crop_replicate(image, position, region_size_hw), output_size_hw)
 
 
 def sized_patches(
@@ -103,20 +71,18 @@ def sized_patches(
     sizes: np.ndarray,
     model_size_hw: tuple[int, int],
 ) -> np.ndarray:
-    """Patches of the given (N, 2) integer (rows, cols) sizes centred on `position`, each resized
-    to the model size: (N, rows, cols[, 3]), as `scale_patches` (which calls this) describes."""
-    model = (int(model_size_hw[0]), int(model_size_hw[1]))
-    generic = area_paths_are_generic(sizes, model)
-    tops = math.floor(position[0]) - sizes[:, 0] // 2
-    lefts = math.floor(position[1]) - sizes[:, 1] // 2
-    if generic.all():  # the usual case: one kernel call, no copy
-        return area_resize_crops(image, tops, lefts, sizes, model)
-    samples = np.empty((len(sizes), *model, *image.shape[2:]), np.uint8)
-    if generic.any():
-        samples[generic] = area_resize_crops(
-            image, tops[generic], lefts[generic], sizes[generic], model
-        )
-    for index in np.flatnonzero(~generic):
-        patch = crop_replicate(image, position, (int(sizes[index, 0]), int(sizes[index, 1])))
-        samples[index] = resize_auto(patch, model)
-    return samples
+    """Patches of the (N, 2) integer (rows, cols) sizes centred on `position`, each resized to
+    the model size: (N, rows, cols[, 3]) (the scale samples, with `scale_sizes`)."""
+    return np.stack(
+        [
+            resize_auto(crop_replicate(image, position, (int(rows), int(cols))), model_size_hw)
+            for rows, cols in sizes
+        ]
+    )
+
+
+def scale_sizes(base_target_size_hw: np.ndarray, scale_factors: np.ndarray) -> np.ndarray:
+    """(N, 2) integer (rows, cols) of the target at each scale factor (at least 2 pixels)."""
+    factors = np.asarray(scale_factors, dtype=np.float64)
+    base = np.asarray(base_target_size_hw, dtype=np.float64)
+    return np.maximum(np.floor(base[None, :] * factors[:, None]), 2).astype(np.int64)

@@ -5,12 +5,10 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from numba import njit
+import scipy.fft
 
 from autotrack.params import TrackerParams
-from autotrack.tracker import pocketfft
-from autotrack.tracker.features import scale_features
-from autotrack.tracker.sampling import scale_patches
+from autotrack.tracker.sampling import scale_sizes
 
 
 def symmetric_hann(n: int) -> np.ndarray:
@@ -24,49 +22,8 @@ def symmetric_hann(n: int) -> np.ndarray:
 def half_spectrum(samples: np.ndarray) -> np.ndarray:
     """FFT along the scale axis of real (scales, dims) samples, non-negative frequencies only:
     (scales // 2 + 1, dims) complex64, equal in value to the first rows of the full FFT
-    (pocketfft computes a real input's full FFT by this real transform)."""
-    return pocketfft.rfft(samples, axis=0)
-
-
-@njit(cache=True, nogil=True, fastmath=False)
-def _learn(numerator, denominator, label_f, samples_f, rate, first):
-    """The model's running average in one pass: numerator <- (1 - rate) numerator + rate
-    label conj(S), denominator <- (1 - rate) denominator + rate sum_d |S_d|^2 (or the new
-    terms alone on the first frame), per scale."""
-    scales, dims = samples_f.shape
-    keep = np.float32(1.0 - rate)
-    rate = np.float32(rate)
-    for i in range(scales):
-        y = label_f[i]
-        energy = np.float32(0.0)
-        for j in range(dims):
-            sample = samples_f[i, j]
-            new_re = y.real * sample.real + y.imag * sample.imag  # label conj(S)
-            new_im = y.imag * sample.real - y.real * sample.imag
-            energy += sample.real * sample.real + sample.imag * sample.imag
-            if first:
-                numerator[i, j] = complex(new_re, new_im)
-            else:
-                old = numerator[i, j]
-                numerator[i, j] = complex(
-                    keep * old.real + rate * new_re, keep * old.imag + rate * new_im
-                )
-        denominator[i] = energy if first else keep * denominator[i] + rate * energy
-
-
-@njit(cache=True, nogil=True, fastmath=False)
-def _response_spectrum(numerator, denominator, samples_f, regulariser, out):
-    """out = sum_d numerator_d S_d / (denominator + lambda), per scale."""
-    scales, dims = samples_f.shape
-    for i in range(scales):
-        acc_re = np.float32(0.0)
-        acc_im = np.float32(0.0)
-        for j in range(dims):
-            a, b = numerator[i, j], samples_f[i, j]
-            acc_re += a.real * b.real - a.imag * b.imag
-            acc_im += a.real * b.imag + a.imag * b.real
-        scale = np.float32(1.0) / (denominator[i] + np.float32(regulariser))
-        out[i] = complex(acc_re * scale, acc_im * scale)
+    (scipy.fft.rfft along the scale axis)."""
+    return scipy.fft.rfft(samples, axis=0, workers=1)
 
 
 class ScaleFilter:
@@ -79,15 +36,17 @@ class ScaleFilter:
         base_target_size_hw: np.ndarray,
         search_size_hw: np.ndarray,
         image_size_hw: tuple[int, int],
+        backend,
     ) -> None:
         n = params.num_scales
         self.params = params
+        self.backend = backend  # its scale_patches and scale_features (`tracker.backend`)
         self.base_target_size_hw = np.asarray(base_target_size_hw, dtype=np.float64)
         centre = math.ceil(n / 2)
         self.scale_steps = params.scale_step ** (centre - np.arange(1, n + 1))
         offsets = np.arange(1, n + 1) - centre
         sigma = math.sqrt(n) * params.scale_sigma_factor
-        self.label_f = pocketfft.fft(np.exp(-0.5 * offsets**2 / sigma**2)).astype(np.complex64)
+        self.label_f = scipy.fft.fft(np.exp(-0.5 * offsets**2 / sigma**2)).astype(np.complex64)
         window = symmetric_hann(n + 1)[1:] if n % 2 == 0 else symmetric_hann(n)
         self.window = window.astype(np.float32)
         target_area = float(np.prod(initial_target_size_hw))
@@ -119,10 +78,9 @@ class ScaleFilter:
     ) -> np.ndarray:
         every = indices is self._all_indices  # no gathered copies of the steps and window
         steps = self.scale_steps if every else self.scale_steps[indices]
-        patches = scale_patches(
-            image, position, self.base_target_size_hw, scale * steps, self.model_size_hw
-        )
-        return scale_features(patches, self.window if every else self.window[indices])
+        sizes = scale_sizes(self.base_target_size_hw, scale * steps)
+        patches = self.backend.sized_patches(image, position, sizes, self.model_size_hw)
+        return self.backend.scale_features(patches, self.window if every else self.window[indices])
 
     def detect(self, image: np.ndarray, position, scale: float) -> tuple[int, float]:
         """Best scale index and the new (clamped) scale factor."""
@@ -145,16 +103,13 @@ class ScaleFilter:
         """
         n = self.params.num_scales
         response_f = np.empty(n, np.complex64)
-        _response_spectrum(
-            self._numerator,
-            self._denominator,
-            samples_f,
-            self.params.scale_lambda,
-            response_f[: samples_f.shape[0]],
+        regulariser = np.float32(self.params.scale_lambda)
+        response_f[: samples_f.shape[0]] = np.sum(self._numerator * samples_f, axis=1) / (
+            self._denominator + regulariser
         )
         mirrored = n - samples_f.shape[0]
         response_f[samples_f.shape[0] :] = np.conj(response_f[mirrored:0:-1])
-        return pocketfft.ifft(response_f).real
+        return scipy.fft.ifft(response_f, workers=1).real
 
     def _shifted_samples(self, image, position, scale: float, best: int) -> np.ndarray:
         """The release's reuse of the detection samples shifted by the chosen scale index."""
@@ -184,10 +139,14 @@ class ScaleFilter:
             samples_f = self._samples_f  # scale unchanged: the detection samples, transformed
         else:
             samples_f = half_spectrum(samples)
-        first = self._numerator is None
-        if first:
-            self._numerator = np.empty(samples_f.shape, np.complex64)
-            self._denominator = np.empty(samples_f.shape[0], np.float32)
-        rate = self.params.scale_learning_rate
-        label_f = self.label_f[: samples_f.shape[0]]
-        _learn(self._numerator, self._denominator, label_f, samples_f, rate, first)
+        # DSST's running average: A <- (1 - rate) A + rate y conj(S), B <- (1 - rate) B +
+        # rate sum_d |S_d|^2 (the new terms alone on the first frame), per scale.
+        numerator = self.label_f[: samples_f.shape[0], None] * np.conj(samples_f)
+        denominator = np.sum(samples_f.real**2 + samples_f.imag**2, axis=1)
+        if self._numerator is None:
+            self._numerator, self._denominator = numerator, denominator
+            return
+        rate = np.float32(self.params.scale_learning_rate)
+        keep = np.float32(1.0) - rate
+        self._numerator = keep * self._numerator + rate * numerator
+        self._denominator = keep * self._denominator + rate * denominator

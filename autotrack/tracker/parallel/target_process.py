@@ -183,9 +183,7 @@ class TargetProcess:
         self._pending += 1
 
 
-_CHILD_MAIN = (
-    "import sys; from autotrack.tracker.target_process import serve; serve(int(sys.argv[1]))"
-)
+_CHILD_MAIN = "import sys; from autotrack.tracker.parallel.target_process import serve; serve(int(sys.argv[1]))"
 
 
 def serve(descriptor: int) -> None:
@@ -257,9 +255,8 @@ class _ChildState:
         """Before a speculative update, a copy of each of its trackers (only the last
         speculative update's are kept); before a plain one, drop the copies of its targets.
 
-        The copy shares the tracker's FFT plans (`transform`: they hold scratch memory only,
-        every input is written before a transform runs, and they cannot be copied) and its
-        parameters (frozen); a tracker put back continues exactly as if the update had never
+        The copy shares the tracker's backend (`backend`: its buffers are scratch memory only,
+        every one written before it is read) and its parameters (frozen); a tracker put back continues exactly as if the update had never
         run."""
         if not speculative:
             for target_id in target_ids:
@@ -268,7 +265,7 @@ class _ChildState:
         self.snapshots = {}
         for target_id in target_ids:
             tracker = self.trackers[target_id]
-            shared = {id(tracker.transform): tracker.transform, id(tracker.params): tracker.params}
+            shared = {id(tracker.backend): tracker.backend, id(tracker.params): tracker.params}
             self.snapshots[target_id] = copy.deepcopy(tracker, shared)
 
 

@@ -1,62 +1,16 @@
-"""Compiled steps of the ADMM loop (dcf.train_filter): the g-step's per-frequency closed form
-(`g_step_kernel`, bit for bit the complex arithmetic it spells out) and element-wise steps,
-bit for bit numpy's.
+"""Compiled steps of the fast backend's ADMM training (`fast_dcf.train_filter`): the g-step's
+per-frequency closed form (`g_step_kernel`, the reference `dcf.g_step` with the neighbouring
+steps in the same passes) and the per-frame sums it takes.
 
-Each kernel fuses what numpy computed as several whole-array operations with temporaries into
-one pass, following numpy's operation order and precision exactly: float32 / complex64
-arithmetic, one rounding per numpy operation, sums over the channel axis taken channel after
-channel (as numpy's reduction over the first axis of a C-contiguous array does), and no
-fastmath (no contraction into fused multiply-adds, no reassociation). A product of two complex
-numbers is numpy's on x86-64 CPUs with FMA3 (its AVX2 loops): re = fma(a.re, b.re, -(a.im b.im)),
-im = fma(a.re, b.im, a.im b.re), with explicit fused multiply-adds (`complex_product`), so a
-kernel takes it the same way on every machine (numpy's own product differs only where numpy
-has no fused loop). tests/test_admm_kernels.py compares every kernel with the numpy expression
-it replaces on features of real sequences.
-
-Arrays are (channels, rows, half columns) complex64 spectra or (channels, rows, cols) float32
-maps, C-contiguous.
+float32 / complex64 arithmetic, no fastmath (no reassociation, no fused multiply-adds), so a
+kernel gives the same bits on every run of one machine. Arrays are (channels, frequencies)
+flat views of the (channels, rows, half columns) spectra, C-contiguous.
 """
 
 from __future__ import annotations
 
 import numpy as np
-from numba import njit, types
-from numba.extending import intrinsic
-
-
-@intrinsic
-def _fused_multiply_add(typingctx, a, b, c):
-    """a * b + c rounded once (llvm.fma: the FMA3 instruction, or libm's fmaf without it)."""
-    if not (a == types.float32 and b == types.float32 and c == types.float32):
-        return None
-
-    def codegen(context, builder, signature, args):
-        return builder.fma(*args)
-
-    return types.float32(types.float32, types.float32, types.float32), codegen
-
-
-@njit(cache=True, nogil=True, fastmath=False, inline="always")
-def complex_product(a_re, a_im, b_re, b_im):
-    """(re, im) of (a_re + i a_im)(b_re + i b_im), float32 parts, as numpy's AVX2 loops take a
-    complex64 product: with fused multiply-adds."""
-    return (
-        _fused_multiply_add(a_re, b_re, -(a_im * b_im)),
-        _fused_multiply_add(a_re, b_im, a_im * b_re),
-    )
-
-
-@njit(cache=True, nogil=True, fastmath=False)
-def shifted_spectrum(zf, phase, out):
-    """out = zf * phase[None]: every channel's spectrum times one phase ramp; numpy: the same
-    product, broadcast. Flat (channels, frequencies) and (frequencies,) views."""
-    channels, frequencies = zf.shape
-    for k in range(channels):
-        source, target = zf[k], out[k]
-        for j in range(frequencies):
-            z, p = source[j], phase[j]
-            re, im = complex_product(z.real, z.imag, p.real, p.imag)
-            target[j] = complex(re, im)
+from numba import njit
 
 
 @njit(cache=True, nogil=True, fastmath=False)
@@ -71,14 +25,14 @@ def training_sums(xf, g_prev, s_xx, s_gx):
     for j in range(frequencies):
         x, g = x_0[j], g_0[j]
         s_xx[j] = x.real * x.real + x.imag * x.imag
-        re, im = complex_product(x.real, -x.imag, g.real, g.imag)
-        s_gx[j] = complex(re, im)
+        s_gx[j] = complex(x.real * g.real + x.imag * g.imag, x.real * g.imag - x.imag * g.real)
     for k in range(1, channels):
         x_k, g_k = xf[k], g_prev[k]
         for j in range(frequencies):
             x, g = x_k[j], g_k[j]
             s_xx[j] += x.real * x.real + x.imag * x.imag
-            re, im = complex_product(x.real, -x.imag, g.real, g.imag)
+            re = x.real * g.real + x.imag * g.imag  # conj(x) g
+            im = x.real * g.imag - x.imag * g.real
             total = s_gx[j]
             s_gx[j] = complex(total.real + re, total.imag + im)
 
@@ -209,61 +163,11 @@ def g_step_kernel(
                 sum_out[k, j] = complex(sum_gamma * (g_re + m.real), sum_gamma * (g_im + m.imag))
 
 
-def scaled_sum(g_f: np.ndarray, l_f: np.ndarray, gamma: np.float32, out: np.ndarray) -> None:
-    """out = gamma (g + l), the h-step's right-hand side (eq. 12); numpy:
-    np.float32(gamma) * (g_f + l_f)."""
-    _scaled_sum_kernel(_parts(g_f), _parts(l_f), gamma, _parts(out))
-
-
-@njit(cache=True, nogil=True, fastmath=False)
-def _scaled_sum_kernel(g_parts, l_parts, gamma, out):
-    channels, rows, parts = g_parts.shape
-    for k in range(channels):
-        for r in range(rows):
-            for p in range(parts):
-                out[k, r, p] = gamma * (g_parts[k, r, p] + l_parts[k, r, p])
-
-
-@njit(cache=True, nogil=True, fastmath=False)
-def h_step_gain(window, lambda_spatial, gamma, num_cells, out):
-    """out = T / (lambda u^2 + gamma T), the h-step's per-cell gain (eq. 12), T = num_cells;
-    numpy: (T / (lambda * u**2 + gamma * T)).astype(np.float32) on a float32 window, where the
-    Python scalars act as float32 (lambda, T) and gamma * T is taken in float64 first."""
-    cells = np.float32(num_cells)
-    lam = np.float32(lambda_spatial)
-    penalty = np.float32(gamma * num_cells)
-    rows, cols = window.shape
-    for r in range(rows):
-        for c in range(cols):
-            u = window[r, c]
-            out[r, c] = cells / (lam * (u * u) + penalty)
-
-
-@njit(cache=True, nogil=True, fastmath=False)
-def apply_gain(maps, scale, gain, out):
-    """out = (maps * scale) * gain[None]: the inverse transform's 1 / N scaling, which pyFFTW's
-    call would take in a pass of its own (a float32 product, `fft_plans.inverse_unscaled`),
-    then the h-step's per-cell gain (eq. 12); numpy: h *= gain after the scaled inverse."""
-    channels, rows, cols = maps.shape
-    for k in range(channels):
-        for r in range(rows):
-            for c in range(cols):
-                out[k, r, c] = (maps[k, r, c] * scale) * gain[r, c]
-
-
-def _parts(spectrum: np.ndarray) -> np.ndarray:
-    """A complex64 (channels, rows, cols) spectrum as float32 (channels, rows, 2 cols): the real
-    and imaginary parts side by side, a view. Sums, differences and products by a real scalar
-    act on each part alone, so a loop over the parts gives the complex loop's values bit for
-    bit, in plain float32 loops the compiler vectorises (2.4x faster at 42 x 50 x 26)."""
-    return spectrum.view(np.float32)
-
-
 class AdmmWorkspace:
     """Buffers of one tracker's ADMM training, reused frame after frame (a tracker trains on one
     thread at a time): all-zero spectra standing for the first iteration's h and multiplier
     (never written), two multiplier buffers (each update reads one and writes the other), the
-    per-frequency sums sum_k |x_k|^2 and sum_k conj(x_k) g_prev_k, and the h-step's gain."""
+    per-frequency sums sum_k |x_k|^2 and sum_k conj(x_k) g_prev_k."""
 
     def __init__(self, spectrum_shape: tuple[int, int, int], grid_size: tuple[int, int]) -> None:
         self.zeros = np.zeros(spectrum_shape, np.complex64)
@@ -273,4 +177,3 @@ class AdmmWorkspace:
         )
         self.s_xx = np.empty(spectrum_shape[1:], np.float32)
         self.s_gx = np.empty(spectrum_shape[1:], np.complex64)
-        self.gain = np.empty(grid_size, np.float32)

@@ -15,11 +15,10 @@ from __future__ import annotations
 import math
 
 import numpy as np
+import scipy.fft
 
-from autotrack.params import TrackerParams
-from autotrack.tracker import dcf, pocketfft
-from autotrack.tracker.features import feature_maps
-from autotrack.tracker.sampling import search_patch
+from autotrack.tracker import dcf
+from autotrack.tracker.backend import Backend
 
 
 def filter_support(
@@ -44,10 +43,11 @@ def placement_response(filter_spatial: np.ndarray, feature_maps: np.ndarray) -> 
     _, big_rows, big_cols = feature_maps.shape
     if big_rows < rows or big_cols < cols:
         raise ValueError("the feature maps must be at least as large as the filter")
-    filter_f = pocketfft.rfft2(filter_spatial, (big_rows, big_cols))
-    maps_f = pocketfft.rfft2(feature_maps)
-    correlation = pocketfft.irfft2(
-        np.einsum("krc,krc->rc", np.conj(filter_f), maps_f), (big_rows, big_cols)
+    grid = (big_rows, big_cols)
+    filter_f = scipy.fft.rfft2(filter_spatial, s=grid, axes=dcf.GRID_AXES, workers=1)
+    maps_f = scipy.fft.rfft2(feature_maps, axes=dcf.GRID_AXES, workers=1)
+    correlation = scipy.fft.irfft2(
+        np.einsum("krc,krc->rc", np.conj(filter_f), maps_f), s=grid, axes=dcf.GRID_AXES, workers=1
     )
     return correlation[: big_rows - rows + 1, : big_cols - cols + 1]
 
@@ -61,21 +61,21 @@ def wide_search_offset(
     filter_f: np.ndarray,
     grid_size: tuple[int, int],
     cos_window: np.ndarray,
-    params: TrackerParams,
-    colour_table: np.ndarray | None,
+    backend: Backend,
 ) -> tuple[np.ndarray, float]:
     """Best target position in a region `span` x the search region, and its raw score.
 
     `position` is the 1-based (row, col) centre of the search, `window_px` the filter's patch
     side (pixels at the filter's resolution) and `scale` image pixels per patch pixel. Returns
-    the best centre as a (row, col) offset from `position`, in image pixels.
+    the best centre as a (row, col) offset from `position`, in image pixels. `backend` samples
+    the region and computes its features (the tracker's own).
     """
-    cell = params.cell_size
+    cell = backend.params.cell_size
     cells = int(math.ceil(span * window_px / cell))
     side_px = cells * cell
     region = int(dcf.matlab_round(side_px * scale))
-    patch = search_patch(image, position, (region, region), (side_px, side_px))
-    maps = feature_maps(patch, params, colour_table)
+    patch = backend.search_patch(image, position, (region, region), (side_px, side_px))
+    maps = backend.feature_maps(patch)
     response = placement_response(filter_support(filter_f, grid_size, cos_window), maps)
     best = int(np.argmax(response))
     row, col = divmod(best, response.shape[1])

@@ -17,7 +17,7 @@ import math
 import cv2
 import numpy as np
 
-from autotrack.tracker.robust import apce
+from autotrack.tracker.plus.robust import apce
 from autotrack.tracker.sampling import search_patch
 
 
@@ -65,8 +65,10 @@ class TurnedSampler:
         position: tuple[float, float],
         region_size_hw: tuple[int, int],
         output_size_hw: tuple[int, int],
+        sample=search_patch,
     ) -> None:
         self.image, self.position = image, position
+        self.search_patch = sample  # `sampling.search_patch` or a backend's (the same pixels)
         self.region_size_hw = region_size_hw
         self.rows, self.cols = int(output_size_hw[0]), int(output_size_hw[1])
         margin = math.ceil(max(self.rows, self.cols) * (math.sqrt(2.0) - 1.0) / 2.0)
@@ -77,13 +79,13 @@ class TurnedSampler:
         """The search patch in the frame turned by `angle_deg`."""
         if angle_deg == 0.0:
             output = (self.rows, self.cols)
-            return search_patch(self.image, self.position, self.region_size_hw, output)
+            return self.search_patch(self.image, self.position, self.region_size_hw, output)
         big_hw = self.big_hw
         if self.big is None:
             factor = (big_hw[0] / self.rows, big_hw[1] / self.cols)
             region = self.region_size_hw
             bigger = (round(region[0] * factor[0]), round(region[1] * factor[1]))
-            self.big = search_patch(self.image, self.position, bigger, big_hw)
+            self.big = self.search_patch(self.image, self.position, bigger, big_hw)
         source_centre = ((big_hw[1] - 1) / 2.0, (big_hw[0] - 1) / 2.0)
         output_centre = ((self.cols - 1) / 2.0, (self.rows - 1) / 2.0)
         matrix = _inverse_map(angle_deg, source_centre, output_centre)

@@ -24,7 +24,7 @@ import math
 import numpy as np
 
 from autotrack.tracker import dcf
-from autotrack.tracker.motion import MotionPrior
+from autotrack.tracker.plus.motion import MotionPrior
 
 
 class LongTermMemory:

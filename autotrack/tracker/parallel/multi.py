@@ -2,7 +2,7 @@
 
 Each target has its own AutoTrack (its own filter, scale filter and regularisation state); the
 frame is decoded and checked once and handed to every tracker, optionally on a thread pool
-(numpy, pocketfft, FFTW, OpenCV and numba release the GIL in the heavy parts) and optionally shared
+(numpy, scipy.fft, OpenCV and numba release the GIL in the heavy parts) and optionally shared
 with child processes (`processes` > 1: the targets are spread over this process and
 `processes - 1` children, `target_process`, which gives true parallelism where threads
 serialise on the GIL). Every result carries the multi-tracker's frame index, so a target added
@@ -33,8 +33,8 @@ import numpy as np
 from autotrack.errors import InputError
 from autotrack.params import TrackerParams
 from autotrack.result import TrackResult
-from autotrack.tracker.speculation import Speculation
-from autotrack.tracker.target_process import SharedFrame, TargetProcess, WorkerPool
+from autotrack.tracker.parallel.speculation import Speculation
+from autotrack.tracker.parallel.target_process import SharedFrame, TargetProcess, WorkerPool
 from autotrack.tracker.tracker import AutoTrack
 
 Box = Sequence[float]

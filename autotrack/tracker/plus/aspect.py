@@ -16,10 +16,8 @@ from __future__ import annotations
 import math
 
 import numpy as np
+import scipy.fft
 
-from autotrack.tracker import pocketfft
-from autotrack.tracker.features import scale_features
-from autotrack.tracker.sampling import sized_patches
 from autotrack.tracker.scale import symmetric_hann
 
 ASPECT_LIMIT = 4.0
@@ -47,13 +45,15 @@ class AspectFilter:
         regulariser: float,
         learning_rate: float,
         model_size_hw: tuple[int, int],
+        backend,
     ) -> None:
         self.count = count
+        self.backend = backend  # its sized_patches and scale_features (`tracker.backend`)
         centre = math.ceil(count / 2)
         self.ratios = step ** (np.arange(1, count + 1) - centre)
         offsets = np.arange(1, count + 1) - centre
         sigma = math.sqrt(count) * sigma_factor
-        self.label_f = pocketfft.fft(np.exp(-0.5 * offsets**2 / sigma**2)).astype(np.complex64)
+        self.label_f = scipy.fft.fft(np.exp(-0.5 * offsets**2 / sigma**2)).astype(np.complex64)
         window = symmetric_hann(count + 1)[1:] if count % 2 == 0 else symmetric_hann(count)
         self.window = window.astype(np.float32)
         self.regulariser = regulariser
@@ -70,9 +70,9 @@ class AspectFilter:
 
     def _samples_f(self, image: np.ndarray, position, target_size_hw: np.ndarray) -> np.ndarray:
         sizes = aspect_sizes(target_size_hw, self.ratios)
-        patches = sized_patches(image, position, sizes, self.model_size_hw)
-        samples = scale_features(patches) * self.window[:, None]
-        return pocketfft.fft(samples, axis=0)
+        patches = self.backend.sized_patches(image, position, sizes, self.model_size_hw)
+        samples = self.backend.scale_features(patches, self.window)
+        return scipy.fft.fft(samples, axis=0, workers=1)
 
     def detect(self, image: np.ndarray, position, target_size_hw: np.ndarray) -> None:
         """Move the aspect to the best of the sampled ratios around the current box
@@ -81,7 +81,7 @@ class AspectFilter:
             return
         samples_f = self._samples_f(image, position, target_size_hw)
         response = np.real(
-            pocketfft.ifft(
+            scipy.fft.ifft(
                 np.sum(self._numerator * samples_f, axis=1) / (self._denominator + self.regulariser)
             )
         )
