@@ -123,7 +123,7 @@ def run_localize_live(
 ) -> int:
     """`autotrack localize SOURCE --realtime`: poses of the processed frames, TUM timestamps =
     capture times, frames numbered by capture index."""
-    from autotrack.cli.localize import DEFAULT_FPS, summarise
+    from autotrack.cli.reports import DEFAULT_FPS, summarise
     from autotrack.io.live import LiveLog, LiveReader, describe_source
     from autotrack.localization.pnp import boxes_by_landmark
     from autotrack.pipeline.live import run_live, warm_up

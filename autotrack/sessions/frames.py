@@ -22,7 +22,7 @@ from mcap.records import Channel, Message
 from autotrack.errors import InputError, SessionError
 from autotrack.io.frames import FrameSource
 from autotrack.sessions.limits import DECODE_ERRORS
-from autotrack.sessions.reader import _iter_records, _scan_records
+from autotrack.sessions.records import iter_records, scan_records
 from autotrack.sessions.schemas import Topics
 from autotrack.sessions.session import Session
 
@@ -32,9 +32,9 @@ def _embedded_jpegs(path: Path) -> dict[int, bytes]:
     images: dict[int, bytes] = {}
     image_channels: set[int] = set()
     with open(path, "rb") as handle:
-        limit, _complete = _scan_records(handle, os.fstat(handle.fileno()).st_size, str(path))
+        limit, _complete = scan_records(handle, os.fstat(handle.fileno()).st_size, str(path))
         try:
-            for record in _iter_records(handle, limit):
+            for record in iter_records(handle, limit):
                 if isinstance(record, Channel) and record.topic == Topics.IMAGE.name:
                     image_channels.add(record.id)
                 elif isinstance(record, Message) and record.channel_id in image_channels:
