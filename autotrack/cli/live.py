@@ -88,14 +88,17 @@ def run_track_live(args: argparse.Namespace, params: Any) -> int:
 
 
 def _live_recording(args: argparse.Namespace, scene_path: Path) -> Any:
-    """The --session recording of a live run: the processed frames are embedded (JPEG), since
-    a live source cannot be replayed."""
+    """The --session recording of a live run: the processed frames are embedded (JPEG, unless
+    --no-frames), since a live source cannot be replayed."""
     if args.session is None:
         return None
     from autotrack.pipeline import Recording
 
     return Recording(
-        source=str(args.sequence), path=args.session, scene_path=scene_path, embed_frames=True
+        source=str(args.sequence),
+        path=args.session,
+        scene_path=scene_path,
+        embed_frames=not args.no_frames,
     )
 
 

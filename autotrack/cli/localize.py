@@ -11,7 +11,12 @@ from typing import TYPE_CHECKING
 import numpy as np
 from tqdm import tqdm
 
-from autotrack.cli.checks import check_output_file, finite
+from autotrack.cli.checks import (
+    add_no_frames_argument,
+    check_output_file,
+    check_session_file,
+    finite,
+)
 from autotrack.cli.live import add_live_arguments, check_source, run_localize_live
 from autotrack.cli.reports import DEFAULT_FPS, smoothed_report, summarise
 from autotrack.errors import InputError
@@ -85,8 +90,9 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
         default=None,
         metavar="FILE",
         help="record the run to this new MCAP session file (never overwritten; see "
-        "`autotrack session`)",
+        "`autotrack session`), the tracked frames embedded",
     )
+    add_no_frames_argument(parser)
     parser.add_argument(
         "--force", action="store_true", help="replace existing --out and --tracks files"
     )
@@ -163,9 +169,7 @@ def _check_arguments(args: argparse.Namespace) -> None:
         (args.smoothed, "--smoothed"),
     ):
         check_output_file(path, option, force=args.force)
-    if args.session is not None and (args.session.exists() or args.session.is_symlink()):
-        raise InputError(f"--session {args.session} exists; session files are never replaced")
-    check_output_file(args.session, "--session", force=False)
+    check_session_file(args.session)
     finite(args.fps, "--fps", low=0)
     finite(args.max_rms, "--max-rms", low=0)
     if args.threads is not None and args.threads < 1:
@@ -224,7 +228,12 @@ def run_localize(args: argparse.Namespace) -> int:
     smoother = SmootherParams(fps=fps, lag_frames=args.smooth_lag) if args.smoothed else None
     recording = None
     if args.session is not None:
-        recording = Recording(source=str(args.sequence), path=args.session, scene_path=scene_path)
+        recording = Recording(
+            source=str(args.sequence),
+            path=args.session,
+            scene_path=scene_path,
+            embed_frames=not args.no_frames,
+        )
     records = OutcomeLog(scene.landmark_ids)
     progress = tqdm(total=len(frames), unit="frame", desc=frames.name, disable=args.quiet)
     with frames, progress:

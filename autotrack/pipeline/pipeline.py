@@ -251,14 +251,17 @@ class Pipeline:
         return self._recorder
 
     def _embed_frame(self, frame_index: int) -> None:
-        """The frame itself into the recording, once, when the recording embeds frames."""
+        """The frame itself into the recording, once, when the recording embeds frames: a JPEG
+        or PNG file's bytes as they are, any other frame encoded once as JPEG."""
         recorder = self._recorder_or_none()
-        if (
-            recorder is not None
-            and frame_index not in self._embedded
-            and recorder.log_frame(frame_index, self.frame(frame_index))
-        ):
-            self._embedded.add(frame_index)
+        if recorder is None or not recorder.embed_frames or frame_index in self._embedded:
+            return
+        encoded = self.frames.encoded(frame_index)
+        if encoded is not None:
+            recorder.log_encoded_frame(frame_index, encoded.data, encoded.format)
+        else:
+            recorder.log_frame(frame_index, self.frame(frame_index))
+        self._embedded.add(frame_index)
 
     def _log_event(self, kind: str, frame_index: int, target_id: str | None, **extra: Any) -> None:
         recorder = self._recorder_or_none()

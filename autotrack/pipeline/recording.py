@@ -26,8 +26,10 @@ class Recording:
     """The scene file, recorded in the metadata and attached."""
     record_maps: bool = True
     """Record each target's response and local-variation maps and spatial weights (mono8)."""
-    embed_frames: bool = False
-    """Record every tracked frame as JPEG too (large)."""
+    embed_frames: bool = True
+    """Embed every tracked frame on the camera topic, so the recording replays as the annotated
+    video (a JPEG or PNG file's bytes as they are, other frames encoded once as JPEG); about as
+    large as the frames' files. False: boxes, signals, maps and poses only."""
 
 
 def open_recorder(

@@ -17,6 +17,36 @@ import os
 from pathlib import Path
 from typing import BinaryIO
 
+try:
+    import fcntl
+except ImportError:  # not POSIX: no lock, a file being written reads as cut short
+    fcntl = None  # type: ignore[assignment]
+
+
+def _lock(handle: BinaryIO, kind: int) -> bool:
+    """Take an advisory lock on the open file without waiting; False if another holds it."""
+    if fcntl is None:
+        return True
+    try:
+        fcntl.flock(handle.fileno(), kind | fcntl.LOCK_NB)
+    except BlockingIOError:
+        return False
+    except OSError:
+        return True  # a file system without locks (some network mounts): no marker
+    return True
+
+
+def recording_in_progress(handle: BinaryIO) -> bool:
+    """Whether a recorder is writing the open session file: the recorder holds an exclusive
+    advisory lock (flock) on it from creation to close, released by the operating system when
+    the recorder's process ends however it ends, so a crashed recording never reads as one in
+    progress. A reader's shared lock attempt fails while it is held (also from another open of
+    the file in the same process)."""
+    if fcntl is None or not _lock(handle, fcntl.LOCK_SH):
+        return fcntl is not None
+    fcntl.flock(handle.fileno(), fcntl.LOCK_UN)
+    return False
+
 
 class SessionFile:
     """A new file written at record boundaries only; closed for good by its first failed write.
@@ -33,6 +63,8 @@ class SessionFile:
         self._raw = raw
         self._fsync = fsync
         self._pending = bytearray()
+        if fcntl is not None:
+            _lock(raw, fcntl.LOCK_EX)  # "being recorded" (`recording_in_progress`)
 
     @property
     def closed(self) -> bool:

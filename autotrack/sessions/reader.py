@@ -25,6 +25,7 @@ from autotrack.sessions.encoding import (
     none_to_nan,
 )
 from autotrack.sessions.limits import DECODE_ERRORS, checked_frame_index
+from autotrack.sessions.output import recording_in_progress
 from autotrack.sessions.records import iter_records, scan_records
 from autotrack.sessions.schemas import TargetStream, TargetTopic, Topics
 from autotrack.sessions.session import PoseTrack, Session, SessionEvent
@@ -147,7 +148,9 @@ class _SessionBuilder:
         elif event.box is not None and all(math.isfinite(v) for v in event.box):
             self.last_boxes[event.target_id] = (event.frame_index, event.box)
 
-    def build(self, path: Path, truncated: bool, bytes_read: int, file_size: int) -> Session:
+    def build(
+        self, path: Path, truncated: bool, bytes_read: int, file_size: int, being_recorded: bool
+    ) -> Session:
         assert self.metadata is not None
         metadata: dict[str, Any] = dict(self.metadata)
         fps = float(metadata.get("fps", DEFAULT_FPS))
@@ -198,6 +201,7 @@ class _SessionBuilder:
             file_size=file_size,
             scene_attachment=self.scene_attachment,
             partial_frame=self._partial_last_frame() if truncated else None,
+            being_recorded=being_recorded,
         )
 
     def _partial_last_frame(self) -> int | None:
@@ -339,6 +343,7 @@ def open_session(path: str | Path, *, load_maps: bool = False) -> Session:
         if size == 0:
             raise SessionError(f"{name} is empty: not an MCAP file")
         limit, complete = scan_records(handle, size, name)
+        being_recorded = not complete and recording_in_progress(handle)
         builder = _SessionBuilder(load_maps)
         try:
             for record in iter_records(handle, limit):
@@ -364,7 +369,13 @@ def open_session(path: str | Path, *, load_maps: bool = False) -> Session:
             f"(no '{SESSION_METADATA_NAME}' metadata record)"
         )
     try:
-        return builder.build(path, truncated=not complete, bytes_read=limit, file_size=size)
+        return builder.build(
+            path,
+            truncated=not complete,
+            bytes_read=limit,
+            file_size=size,
+            being_recorded=being_recorded,
+        )
     except SessionError as error:
         raise SessionError(f"{name} is corrupted: {error}") from error
     except DECODE_ERRORS as error:

@@ -36,7 +36,7 @@ from autotrack.sessions.encoding import (
     encode_json,
     frame_time_ns,
 )
-from autotrack.sessions.metadata import params_dict, session_metadata
+from autotrack.sessions.metadata import params_dict, path_text, session_metadata
 from autotrack.sessions.names import (
     check_event_kind,
     check_landmark_id,
@@ -149,7 +149,7 @@ class SessionRecorder:
         self._sequence = 0
         self._pending_since: float | None = None
         self._closed = False
-        self._start(None if scene_path is None else Path(scene_path).name, scene_bytes)
+        self._start(None if scene_path is None else path_text(Path(scene_path).name), scene_bytes)
         self._stop = threading.Event()
         self._flusher = threading.Thread(
             target=self._flush_loop, name=f"session-flush-{self.path.name}", daemon=True
@@ -283,7 +283,8 @@ class SessionRecorder:
         self._write(messages.pose_messages(time_ns, pose), time_ns)
 
     def log_frame(self, frame_index: int, image_rgb: np.ndarray) -> bool:
-        """Record a video frame as JPEG (foxglove.CompressedImage) if embed_frames is on.
+        """Record a decoded video frame, encoded once as JPEG (`jpeg_quality`), on the camera
+        topic (foxglove.CompressedImage, frame `camera`) if embed_frames is on.
 
         Returns True when the frame was recorded, False when embedding is off.
         """
@@ -298,8 +299,20 @@ class SessionRecorder:
         ok, encoded = cv2.imencode(".jpg", bgr, [cv2.IMWRITE_JPEG_QUALITY, self.jpeg_quality])
         if not ok:
             raise SessionError(f"frame {frame_index}: JPEG encoding failed")
+        return self.log_encoded_frame(frame_index, encoded.tobytes(), "jpeg")
+
+    def log_encoded_frame(self, frame_index: int, data: bytes, image_format: str) -> bool:
+        """Record a video frame already encoded (a JPEG or PNG file's bytes, as they are) on the
+        camera topic if embed_frames is on; returns whether it was recorded."""
+        if image_format not in EMBEDDED_IMAGE_FORMATS:
+            raise SessionError(
+                f"frame {frame_index}: embedded frames are {' or '.join(EMBEDDED_IMAGE_FORMATS)}, "
+                f"not {image_format!r}"
+            )
+        if not self.embed_frames:
+            return False
         time_ns = frame_time_ns(frame_index, self.fps)
-        message = messages.compressed_image(time_ns, CAMERA_FRAME, encoded.tobytes(), "jpeg")
+        message = messages.compressed_image(time_ns, CAMERA_FRAME, bytes(data), image_format)
         self._write([(Topics.IMAGE, message)], time_ns)
         return True
 
@@ -377,10 +390,12 @@ class SessionRecorder:
                     now, 0, scene_name, "application/octet-stream", scene_bytes
                 )
             self._writer.flush()
-        except OSError as error:
+        except BaseException as error:
             self._file.close()
             self.path.unlink(missing_ok=True)  # a header cut short holds nothing: no orphan
-            raise SessionError(f"cannot write session file {self.path}: {error}") from error
+            if isinstance(error, OSError):
+                raise SessionError(f"cannot write session file {self.path}: {error}") from error
+            raise
 
     def _raise_if_unusable(self) -> None:
         if self._file.error is not None:
