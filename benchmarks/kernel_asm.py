@@ -6,7 +6,7 @@ grey, then counts, per kernel and signature, the instructions that have cost us 
 
 - `vmaskmovps`/`vmaskmovpd` stores: LLVM emits them for a loop that stores conditionally,
   which includes `a[i] = x if c else a[i]` (storing back the value just loaded counts as no
-  store); AMD's Zen cores run them at a fraction of a plain store's rate (docs/benchmarks.md,
+  store); AMD's Zen cores run them at a fraction of a plain store's rate (docs/history.md,
   eighteenth round). Masked loads (a load only one branch of a select uses) are counted too,
   not flagged: they cost far less;
 - `vgather`: gathers, slower than scalar loads on most x86 cores;

@@ -365,6 +365,37 @@ def test_the_private_name_rule_catches_each_kind_of_use(tmp_path: Path, monkeypa
     ]
 
 
+LAYERS = (
+    ("autotrack.errors", "autotrack.params", "autotrack.result"),
+    ("autotrack.io",),
+    ("autotrack.tracker", "autotrack.localization"),
+    ("autotrack.sessions",),
+    ("autotrack.pipeline",),
+    ("autotrack.evaluation", "autotrack.synthetic", "autotrack.cli"),
+)
+"""The library's layers (docs/architecture.md), lowest first: a module imports only its own
+layer and those below (modules outside them, e.g. `autotrack.machine`, are helpers any may use)."""
+
+
+def _layer(module: str) -> int | None:
+    for index, packages in enumerate(LAYERS):
+        if any(module == p or module.startswith(p + ".") for p in packages):
+            return index
+    return None
+
+
+def test_the_library_imports_only_downwards_through_its_layers() -> None:
+    upward = [
+        f"{module} -> {target}"
+        for module, targets in _import_graph(_project_modules(("autotrack",))).items()
+        for target in sorted(targets)
+        if _layer(module) is not None
+        and _layer(target) is not None
+        and _layer(target) > _layer(module)
+    ]
+    assert not upward, f"imports against the layers: {upward}"
+
+
 def test_the_library_never_imports_the_app() -> None:
     offenders = []
     for path in (ROOT / "autotrack").rglob("*.py"):

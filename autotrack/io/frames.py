@@ -456,7 +456,7 @@ class FrameCache:
 READ_AHEAD_FRAMES = 3
 """Frames a `FrameCache` decodes ahead of the caller: with two tracking processes on two cores,
 three let the decoding fill idle time that one frame ahead leaves unused (71.1 against 69.7
-frames/s, docs/benchmarks.md, round 19); six gave no more."""
+frames/s, docs/history.md, round 19); six gave no more."""
 
 READ_AHEAD_THREADS = 2
 """Threads decoding the frames read ahead: two can fill idle time on both cores at once
