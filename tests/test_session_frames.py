@@ -78,6 +78,7 @@ def test_localize_embeds_each_frame_as_its_file_or_encoded_once(
 
     recorded = open_session(session)
     assert recorded.image_count == FRAMES and recorded.metadata["embed_frames"] == "true"
+    assert not recorded.recorded_live  # reopened on its sequence, not on these frames
     with open_frames(short_demo) as original:
         embedded = EmbeddedFrames(recorded)
         assert len(embedded) == FRAMES

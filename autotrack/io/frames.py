@@ -152,6 +152,8 @@ class FrameSource(ABC):
     independent_reads: bool = False
     """Reading a frame touches no state another read uses, so `FrameCache` may decode the next
     frames on background threads, several at once (not a video: its decoder reads in order)."""
+    live: bool = False
+    """Frames of a live source (a camera, a stream), which cannot be read again later."""
 
     @abstractmethod
     def __len__(self) -> int:

@@ -244,7 +244,7 @@ class Pipeline:
             if self.scene is not None:
                 landmark_positions(self.scene)  # its ids are refused before the file exists
             self._recorder = open_recorder(
-                self.recording, self.params, self.fps, self.resumed_from, self.frames.name
+                self.recording, self.params, self.fps, self.resumed_from, self.frames
             )
             if self.scene is not None:
                 self._recorder.log_landmarks(self.scene)

@@ -79,6 +79,7 @@ def session_metadata(
     record_maps: bool,
     flush_interval: float,
     resumed_from: str | Path | None,
+    live_source: bool = False,
 ) -> dict[str, str]:
     """The session metadata record (every value a string, as MCAP metadata requires)."""
     return {
@@ -94,6 +95,7 @@ def session_metadata(
         "tracker_params": json.dumps(params, sort_keys=True),
         "embed_frames": "true" if embed_frames else "false",
         "record_maps": "true" if record_maps else "false",
+        "live_source": "true" if live_source else "false",
         "map_encoding": "mono8, min-max per map: value = lo + q / 255 * (hi - lo), "
         "[lo, hi] in the target's signals message",
         "flush_interval_s": repr(flush_interval),

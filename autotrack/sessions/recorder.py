@@ -95,6 +95,7 @@ class SessionRecorder:
         flush_interval: float = DEFAULT_FLUSH_INTERVAL_S,
         fsync: bool = False,
         resumed_from: str | Path | None = None,
+        live_source: bool = False,
     ) -> None:
         """Create the session file at exactly `path`; an existing file is never overwritten.
 
@@ -110,6 +111,8 @@ class SessionRecorder:
         flush_interval: longest time (s) a message waits in memory before reaching the OS.
         fsync: also fsync the file at each flush (survives power loss, slower).
         resumed_from: the session this one continues, if any.
+        live_source: the frames come from a live source (a camera, a stream): a reopened
+            session is looked through on its embedded frames (`Session.recorded_live`).
         """
         if fps is not None and not (math.isfinite(fps) and fps > 0):
             raise SessionError(f"fps must be a positive number, got {fps}")
@@ -137,6 +140,7 @@ class SessionRecorder:
             record_maps=self.record_maps,
             flush_interval=self.flush_interval,
             resumed_from=resumed_from,
+            live_source=live_source,
         )
         self._file = SessionFile(_create_file(self.path), self.path, fsync=self._fsync)
         self._lock = threading.Lock()

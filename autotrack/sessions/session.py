@@ -122,6 +122,14 @@ class Session:
         return recorded_path(self.metadata, "source")
 
     @property
+    def recorded_live(self) -> bool:
+        """The frames came from a live source, which cannot be replayed: the session is looked
+        through on its embedded frames. (Sessions written before the `live_source` marker:
+        those that embed frames, which only live runs did then.)"""
+        marker = self.metadata.get("live_source")
+        return marker == "true" if marker is not None else self.image_count > 0
+
+    @property
     def scene_path(self) -> str | None:
         """The scene file the session was recorded with, as recorded (None: no scene)."""
         return recorded_path(self.metadata, "scene_path") or None
