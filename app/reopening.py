@@ -35,7 +35,7 @@ class SessionCommands:
         if writer == self.tab_id:  # this tab's own recording: finished first, then reopened
             self.close_run()
         session = open_session(path)
-        if session.image_count:  # a live run's recording: its own frames, to look through
+        if session.recorded_live:  # a live run's recording: its own frames, to look through
             return self.review_session(path)
         source = self.resolve_path(session.source)
         scene_path = self.resolve_path(session.scene_path) if session.scene_path else None

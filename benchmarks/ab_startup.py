@@ -6,7 +6,7 @@ temporary folder. Each side has its own kernel cache, FFTW wisdom and user cache
 beforehand by a first process (it compiles the kernels and searches the FFT plans) and one
 second process; then `--pairs` pairs of fresh processes, one of each side in alternating order,
 run `speed.py`'s first-frame script (building5: import, read two frames, init, one update).
-The host's speed drifts from one second to the next (docs/benchmarks.md, round 15), so only
+The host's speed drifts from one second to the next (docs/history.md, round 15), so only
 the interleaved pairs compare; the figures are every run and the medians.
 
 python benchmarks/ab_startup.py 7abd726

@@ -27,7 +27,7 @@ import numpy as np
 
 from autotrack import AutoTrack, preset
 from autotrack.evaluation.datasets import load_otb_sequence
-from autotrack.evaluation.metrics import auc, center_errors, overlaps, precision_at, success_curve
+from autotrack.evaluation.metrics import overlaps, score_sequence
 from autotrack.io.frames import read_image
 from autotrack.io.otb_boxes import read_boxes, write_boxes
 
@@ -84,10 +84,8 @@ def track_all(jobs: list, processes: int = 1) -> list[tuple[str, str, np.ndarray
 
 def scores(boxes: np.ndarray, ground_truth: np.ndarray) -> tuple[float, float]:
     """(P@20, AUC) against the ground truth; NaN ground-truth rows are skipped."""
-    return (
-        precision_at(center_errors(boxes, ground_truth), 20.0),
-        auc(success_curve(overlaps(boxes, ground_truth))),
-    )
+    score = score_sequence("", boxes, ground_truth)
+    return score.precision, score.auc
 
 
 @dataclass(frozen=True)

@@ -1,8 +1,9 @@
 """Session file size per 1,000 frames: four tracked landmarks + a camera pose every frame.
 
 Records the embedded demo (60 frames, 960x540) through the localisation pipeline three times —
-without maps, with the response, local-variation and spatial-weight maps (the default), and with
-embedded JPEG frames — and scales the file sizes to 1,000 frames.
+without maps or frames, with the response, local-variation and spatial-weight maps, and with the
+maps and the frames' JPEG files embedded (a pipeline recording's default) — and scales the file
+sizes to 1,000 frames.
 
     python benchmarks/session_size.py
 """
@@ -35,9 +36,18 @@ def record(path: Path, **options: bool) -> int:
 
 def main() -> None:
     variants = {
-        "boxes, signals, poses (record_maps=False)": {"record_maps": False},
-        "+ response, local-variation and spatial-weight maps (default)": {"record_maps": True},
-        "+ maps + embedded JPEG frames (960x540)": {"record_maps": True, "embed_frames": True},
+        "boxes, signals, poses (record_maps=False, --no-frames)": {
+            "record_maps": False,
+            "embed_frames": False,
+        },
+        "+ response, local-variation and spatial-weight maps": {
+            "record_maps": True,
+            "embed_frames": False,
+        },
+        "+ maps + the demo's 960x540 JPEG files (default)": {
+            "record_maps": True,
+            "embed_frames": True,
+        },
     }
     print("size per 1,000 frames, 4 targets + pose per frame (embedded demo):")
     with tempfile.TemporaryDirectory() as folder:

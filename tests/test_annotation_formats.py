@@ -184,14 +184,14 @@ def test_session_export_writes_mot_and_cvat_with_the_corrected_frames_as_keyfram
     argv += ["--frame-size", "320x240", "--force"]
     assert main(argv) == 0
     printed = capsys.readouterr().out
-    assert "(MOT ids: t1=1, t2=2)" in printed  # t3 was deleted by the user
+    assert "(MOT ids: t1 (L1)=1, t2 (L2)=2)" in printed  # t3 was deleted by the user
     read = read_mot(mot, len(session.frame_indices))
     np.testing.assert_allclose(read[1], session.tracks["t1"], atol=0.005)
     np.testing.assert_allclose(read[2], session.tracks["t2"], atol=0.005)
     meta, tracks = read_cvat_video(cvat)
     root = ElementTree.parse(cvat).getroot()
     assert root.findtext("meta/task/original_size/width") == "320"
-    assert [track.label for track in tracks] == ["t1", "t2"]
+    assert [track.label for track in tracks] == ["t1 (L1)", "t2 (L2)"]  # target (landmark)
     np.testing.assert_allclose(tracks[0].boxes, session.tracks["t1"], atol=0.005)
     assert tracks[0].keyframes == {0, 20}  # drawn at 0, corrected at 20
     assert tracks[1].keyframes == {0}

@@ -381,8 +381,9 @@ def test_exports_hold_what_the_session_recorded(controller, tmp_path: Path) -> N
     name, content = controller.export("tracks")
     assert name == f"{run.session_path.stem}_tracks.zip"
     with zipfile.ZipFile(io.BytesIO(content)) as archive:
-        assert sorted(archive.namelist()) == ["T1.txt", "T2.txt", "T3.txt", "T4.txt", "tracks.csv"]
-        rows = archive.read("T1.txt").decode().split()
+        names = sorted(archive.namelist())  # T<n>_<landmark>.txt, then tracks.csv
+        assert [name.split("_")[0] for name in names] == ["T1", "T2", "T3", "T4", "tracks.csv"]
+        rows = archive.read(names[0]).decode().split()
         csv_rows = archive.read("tracks.csv").decode().strip().splitlines()
     assert len(rows) == 6 and len(csv_rows) == 1 + 4 * 6
     for frame_index, row in enumerate(rows):  # OTB rows are 1-based
@@ -443,7 +444,12 @@ def test_exports_are_built_from_the_session_file_alone(tmp_path: Path) -> None:
 
     with zipfile.ZipFile(io.BytesIO(exports.tracks_zip(path))) as archive:
         for target_id in session.targets:
-            rows = np.loadtxt(io.StringIO(archive.read(f"{target_id}.txt").decode()), delimiter=",")
+            rows = np.loadtxt(
+                io.StringIO(
+                    archive.read(f"{target_id}_{session.landmark_ids[target_id]}.txt").decode()
+                ),
+                delimiter=",",
+            )
             np.testing.assert_allclose(rows, session.tracks[target_id] + [1, 1, 0, 0], atol=1e-3)
         header, *csv_rows = archive.read("tracks.csv").decode().strip().splitlines()
     assert len(csv_rows) == 4 * 4 and "aberrant" in header

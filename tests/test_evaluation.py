@@ -11,7 +11,6 @@ from autotrack.evaluation.metrics import (
     auc,
     center_errors,
     overlaps,
-    precision_at,
     precision_curve,
     score_sequence,
     success_curve,
@@ -93,7 +92,7 @@ def test_precision_curve_counts_errors_at_or_below_threshold():
     assert curve[20] == pytest.approx(3 / 5)  # 20 <= 20, 20.5 is not
     assert curve[21] == pytest.approx(4 / 5)
     assert curve[50] == pytest.approx(4 / 5)  # inf never counts
-    assert precision_at(errors, 20) == pytest.approx(0.6)
+    assert precision_curve(errors, np.array([20.0]))[0] == pytest.approx(0.6)
 
 
 def test_success_curve_counts_overlaps_strictly_above_threshold():

@@ -145,7 +145,7 @@ def test_localize_realtime_writes_poses_at_the_capture_times(tmp_path, capsys) -
     assert [int(row["frame"]) for row in tracks] == [int(row["frame"]) for row in rows]
     # The session holds the processed frames' images (a live source cannot be replayed).
     session = open_session(tmp_path / "live.mcap")
-    assert session.image_count == len(rows)
+    assert session.image_count == len(rows) and session.recorded_live
     recorded = np.flatnonzero(np.isfinite(next(iter(session.tracks.values()))).all(axis=1))
     assert recorded.tolist() == [int(row["frame"]) for row in rows]
     # Frames are numbered by capture index: each valid pose is near that frame's true pose.

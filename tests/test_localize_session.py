@@ -82,6 +82,7 @@ def test_localize_session_round_trips_to_the_same_tracks_and_poses(tmp_path, cap
     expected = Counter({"/events": len(LANDMARKS), "/landmarks": 1})
     expected.update({topic: valid_poses for topic in ("/camera/pose", "/tf")})
     expected["/camera/pose_quality"] = FRAMES
+    expected["/camera/image"] = FRAMES  # the frames are embedded by default
     for landmark, target in target_of.items():
         trained = FRAMES - int(np.sum(columns[f"{landmark}_aberrant"]))
         expected[f"/targets/{target}/spatial_window"] = trained
@@ -104,7 +105,7 @@ def test_localize_session_round_trips_to_the_same_tracks_and_poses(tmp_path, cap
         np.testing.assert_allclose(a, b, atol=1e-6)
     # Same per-frame boxes as the localize CSV, per landmark.
     for landmark, target in target_of.items():
-        boxes = read_boxes(exported / "tracks" / f"{target}.txt")
+        boxes = read_boxes(exported / "tracks" / f"{target}_{landmark}.txt")
         expected_boxes = np.stack([columns[f"{landmark}_{k}"] for k in "xywh"], axis=1)
         assert boxes.shape == (FRAMES, 4)
         np.testing.assert_allclose(boxes, expected_boxes, atol=0.01)

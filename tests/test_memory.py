@@ -143,7 +143,6 @@ def test_a_frame_is_read_from_its_own_chunk_not_by_scanning_the_file(tmp_path) -
             recorder.flush()  # one chunk per frame
     maps = SessionMaps(tmp_path / "s.mcap")
     got = maps.frame_maps("T1", 33)
-    assert maps.chunks_indexed == 40
     assert maps.chunks_decoded <= 2  # the chunk naming the channels, and frame 33's
     values = written[33]
     np.testing.assert_allclose(got.response, values, atol=0.5 * np.ptp(values) / 255 + 1e-6)

@@ -29,8 +29,8 @@ from autotrack.synthetic.scenarios import (
 from autotrack.synthetic.trajectories import (
     RenderSettings,
     SequenceSpec,
-    _yaw_pitch,
     ground_truth_poses,
+    yaw_pitch,
 )
 from autotrack.synthetic.world import default_camera, default_scene, landmark_box
 
@@ -61,7 +61,7 @@ def test_a_landmark_the_pose_puts_outside_the_image_is_out_of_view(flight):
     boxes = first_boxes(rotations[0], positions[0])
     keeper.observe(0, blank, pose_estimate(0, rotations[0], positions[0]), boxes, {})
     assert keeper.out_of_view(1) == {}
-    turned = _yaw_pitch(rotations[1], math.radians(20.0), 0.0)  # D leaves on the right
+    turned = yaw_pitch(rotations[1], math.radians(20.0), 0.0)  # D leaves on the right
     keeper.observe(1, blank, pose_estimate(1, turned, positions[1], ("A", "B", "C")), boxes, {})
     assert keeper.out_of_view(2) == {"D": "out of view"}
     # The prediction is only trusted while the pose is recent.

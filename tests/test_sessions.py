@@ -381,7 +381,7 @@ def test_localization_run_round_trips_through_export(
     target_of = {landmark: target for target, landmark in session.landmark_ids.items()}
     for landmark_id in boxes:
         expected = np.array([o.landmark_tracks[landmark_id].box for o in outputs])
-        exported = read_boxes(out / f"{target_of[landmark_id]}.txt")
+        exported = read_boxes(out / f"{target_of[landmark_id]}_{landmark_id}.txt")
         np.testing.assert_allclose(exported, expected, atol=1e-4)
     valid = [o.pose for o in outputs if o.pose.valid]
     write_tum(
@@ -670,7 +670,6 @@ def test_recorder_rejects_bad_ids_kinds_and_use_after_close(tmp_path: Path) -> N
         recorder.log_event("box_drawn", 0, "t1", note=object())
     recorder.log_target("t1", result)
     recorder.flush()
-    assert recorder.saved_frame_index == 1
     recorder.close()
     recorder.close()
     with pytest.raises(SessionError, match="is closed"):
@@ -741,23 +740,25 @@ def test_cli_export_round_trips_tracks_csv_and_tum(
     # t3 was deleted by the user at frame 30: exports leave it out.
     assert session.deleted_targets == {"t3"}
     assert not (out / "tracks" / "t3.txt").exists()
+    assert sorted(p.name for p in (out / "tracks").iterdir()) == ["t1_L1.txt", "t2_L2.txt"]
     for target_id in session.exported_targets:
-        lines = (out / "tracks" / f"{target_id}.txt").read_text().splitlines()
+        track_file = out / "tracks" / f"{target_id}_{session.landmark_ids[target_id]}.txt"
+        lines = track_file.read_text().splitlines()
         first_box = recorded.results[target_id][0].box
         first_frame = recorded.results[target_id][0].frame_index
         x, y, w, h = (float(v) for v in lines[first_frame].split(","))
         assert (x, y, w, h) == pytest.approx(
             (first_box[0] + 1, first_box[1] + 1, *first_box[2:]), abs=1e-4
         )
-        boxes = read_boxes(out / "tracks" / f"{target_id}.txt")
+        boxes = read_boxes(track_file)
         np.testing.assert_allclose(boxes, session.tracks[target_id], atol=1e-4)
     rows = (out / "all.csv").read_text().splitlines()
-    assert rows[0] == "frame,target,x,y,w,h,score,aberrant"
+    assert rows[0] == "frame,target,landmark,x,y,w,h,score,aberrant"
     kept = [series for target, series in recorded.results.items() if target != "t3"]
     assert len(rows) - 1 == sum(len(series) for series in kept)
     assert not any(row.split(",")[1] == "t3" for row in rows[1:])
-    frame, target, *numbers = rows[1 + 2 * 7 + 1].split(",")  # frame 7, t2
-    assert (frame, target) == ("7", "t2")
+    frame, target, landmark, *numbers = rows[1 + 2 * 7 + 1].split(",")  # frame 7, t2
+    assert (frame, target, landmark) == ("7", "t2", "L2")
     result = recorded.results["t2"][7]
     assert [float(v) for v in numbers[:4]] == list(result.box)
     assert float(numbers[4]) == result.peak_score and numbers[5] == str(int(result.aberrant))
@@ -794,6 +795,50 @@ def test_cli_info_says_when_a_session_was_cut_short(
     cut = tmp_path / "cut.mcap"
     cut.write_bytes(data[: len(data) // 2])
     assert main(["session", "info", str(cut)]) == 0
+    assert "complete  NO: cut short" in capsys.readouterr().out
+
+
+def test_cli_info_says_being_recorded_for_a_file_a_recorder_still_writes(
+    tmp_path: Path, capsys: pytest.CaptureFixture
+) -> None:
+    import subprocess
+    import sys
+
+    from tests.conftest import REPO
+
+    result = _results(0, range(3), 1)[1]
+    live = tmp_path / "live.mcap"
+    with SessionRecorder(live, source="x", tracker_params={}) as recorder:
+        recorder.log_target("t1", result)
+        recorder.flush()
+        assert open_session(live).being_recorded
+        assert main(["session", "info", str(live)]) == 0
+        assert "complete  not yet: being recorded" in capsys.readouterr().out
+    assert not open_session(live).being_recorded  # closed: complete
+    # Another process recording: being recorded while it runs; cut short once it is killed.
+    other = tmp_path / "other.mcap"
+    script = (
+        "import sys; from autotrack.sessions import SessionRecorder\n"
+        "r = SessionRecorder(sys.argv[1], source='x', tracker_params={})\n"
+        "print('ready', flush=True); sys.stdin.read()\n"
+    )
+    child = subprocess.Popen(
+        [sys.executable, "-c", script, str(other)],
+        stdin=subprocess.PIPE,
+        stdout=subprocess.PIPE,
+        text=True,
+        cwd=REPO,
+    )
+    try:
+        assert child.stdout.readline().strip() == "ready"
+        session = open_session(other)
+        assert session.truncated and session.being_recorded
+    finally:
+        child.kill()
+        child.wait(timeout=60)
+    session = open_session(other)
+    assert session.truncated and not session.being_recorded
+    assert main(["session", "info", str(other)]) == 0
     assert "complete  NO: cut short" in capsys.readouterr().out
 
 

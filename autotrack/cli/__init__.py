@@ -30,6 +30,7 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv: list[str] | None = None) -> int:
+    _show_any_path()
     parser = build_parser()
     args = parser.parse_args(argv)
     try:
@@ -52,6 +53,15 @@ def main(argv: list[str] | None = None) -> int:
     except KeyboardInterrupt:
         print("autotrack: interrupted", file=sys.stderr)
         return 130
+
+
+def _show_any_path() -> None:
+    """Print paths that are not valid UTF-8 (a Latin-1 folder name) with their odd bytes as
+    `\\xe9` instead of failing on them (they reach the program surrogate-escaped)."""
+    for stream in (sys.stdout, sys.stderr):
+        reconfigure = getattr(stream, "reconfigure", None)
+        if reconfigure is not None:
+            reconfigure(errors="backslashreplace")
 
 
 def _one_line(text: str) -> str:

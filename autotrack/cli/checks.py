@@ -7,6 +7,7 @@ that would overwrite a file without `--force` ends the command at once, in one l
 
 from __future__ import annotations
 
+import argparse
 import math
 import os
 from pathlib import Path
@@ -23,6 +24,24 @@ def _nearest_existing(path: Path) -> Path:
     while not current.exists() and current != current.parent:
         current = current.parent
     return current
+
+
+def add_no_frames_argument(parser: argparse.ArgumentParser) -> None:
+    """--no-frames: a --session recording without the frames (boxes, maps and poses only)."""
+    parser.add_argument(
+        "--no-frames",
+        action="store_true",
+        help="with --session: do not embed the tracked frames (a much smaller file that "
+        "replays without its footage)",
+    )
+
+
+def check_session_file(path: Path | None) -> None:
+    """--session names a file that does not exist yet (session files are never replaced) and
+    can be created."""
+    if path is not None and (path.exists() or path.is_symlink()):
+        raise InputError(f"--session {path} exists; session files are never replaced")
+    check_output_file(path, "--session", force=False)
 
 
 def check_output_file(path: Path | None, option: str, *, force: bool) -> None:

@@ -88,14 +88,17 @@ def run_track_live(args: argparse.Namespace, params: Any) -> int:
 
 
 def _live_recording(args: argparse.Namespace, scene_path: Path) -> Any:
-    """The --session recording of a live run: the processed frames are embedded (JPEG), since
-    a live source cannot be replayed."""
+    """The --session recording of a live run: the processed frames are embedded (JPEG, unless
+    --no-frames), since a live source cannot be replayed."""
     if args.session is None:
         return None
     from autotrack.pipeline import Recording
 
     return Recording(
-        source=str(args.sequence), path=args.session, scene_path=scene_path, embed_frames=True
+        source=str(args.sequence),
+        path=args.session,
+        scene_path=scene_path,
+        embed_frames=not args.no_frames,
     )
 
 
@@ -123,7 +126,7 @@ def run_localize_live(
 ) -> int:
     """`autotrack localize SOURCE --realtime`: poses of the processed frames, TUM timestamps =
     capture times, frames numbered by capture index."""
-    from autotrack.cli.localize import DEFAULT_FPS, summarise
+    from autotrack.cli.reports import DEFAULT_FPS, summarise
     from autotrack.io.live import LiveLog, LiveReader, describe_source
     from autotrack.localization.pnp import boxes_by_landmark
     from autotrack.pipeline.live import run_live, warm_up

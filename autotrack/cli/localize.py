@@ -3,30 +3,30 @@
 from __future__ import annotations
 
 import argparse
-import math
 import sys
-from collections.abc import Iterator
 from dataclasses import replace
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING
 
 import numpy as np
 from tqdm import tqdm
 
-from autotrack.cli.checks import check_output_file, finite
+from autotrack.cli.checks import (
+    add_no_frames_argument,
+    check_output_file,
+    check_session_file,
+    finite,
+)
 from autotrack.cli.live import add_live_arguments, check_source, run_localize_live
+from autotrack.cli.reports import DEFAULT_FPS, smoothed_report, summarise
 from autotrack.errors import InputError
 from autotrack.io.boxes_json import read_boxes_json
-from autotrack.io.csv_table import write_csv
 from autotrack.io.live import source_argument
-from autotrack.localization.scene import Scene, load_scene, scene_warnings
+from autotrack.localization.scene import load_scene, scene_warnings
 from autotrack.params import PRESETS, preset
 
 if TYPE_CHECKING:
-    from autotrack.pipeline.outcomes import OutcomeLog
-
-DEFAULT_FPS = 10.0
-LARGE_ERROR_CM = 20.0
+    pass
 
 
 def add_parser(subparsers: argparse._SubParsersAction) -> None:
@@ -90,8 +90,9 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
         default=None,
         metavar="FILE",
         help="record the run to this new MCAP session file (never overwritten; see "
-        "`autotrack session`)",
+        "`autotrack session`), the tracked frames embedded",
     )
+    add_no_frames_argument(parser)
     parser.add_argument(
         "--force", action="store_true", help="replace existing --out and --tracks files"
     )
@@ -168,9 +169,7 @@ def _check_arguments(args: argparse.Namespace) -> None:
         (args.smoothed, "--smoothed"),
     ):
         check_output_file(path, option, force=args.force)
-    if args.session is not None and (args.session.exists() or args.session.is_symlink()):
-        raise InputError(f"--session {args.session} exists; session files are never replaced")
-    check_output_file(args.session, "--session", force=False)
+    check_session_file(args.session)
     finite(args.fps, "--fps", low=0)
     finite(args.max_rms, "--max-rms", low=0)
     if args.threads is not None and args.threads < 1:
@@ -229,7 +228,12 @@ def run_localize(args: argparse.Namespace) -> int:
     smoother = SmootherParams(fps=fps, lag_frames=args.smooth_lag) if args.smoothed else None
     recording = None
     if args.session is not None:
-        recording = Recording(source=str(args.sequence), path=args.session, scene_path=scene_path)
+        recording = Recording(
+            source=str(args.sequence),
+            path=args.session,
+            scene_path=scene_path,
+            embed_frames=not args.no_frames,
+        )
     records = OutcomeLog(scene.landmark_ids)
     progress = tqdm(total=len(frames), unit="frame", desc=frames.name, disable=args.quiet)
     with frames, progress:
@@ -264,117 +268,3 @@ def run_localize(args: argparse.Namespace) -> int:
     if args.session is not None:
         print(f"session recorded to {args.session}")
     return 0
-
-
-def summarise(
-    records: OutcomeLog,
-    timestamps: np.ndarray,
-    scene: Scene,
-    out: Path | None,
-    tracks: Path | None,
-    gt: tuple[np.ndarray, np.ndarray, np.ndarray] | None,
-    name: str,
-) -> str:
-    """Write the requested files and return the text report (`name` labels the Table-3 row)."""
-    from autotrack.io.tum import write_tum
-    from autotrack.localization.trajectory import format_table3, trajectory_errors
-
-    poses = records.poses
-    positions = np.array([pose.position for pose in poses]).reshape(-1, 3)
-    quaternions = np.array([pose.quaternion_xyzw() for pose in poses]).reshape(-1, 4)
-    valid = sum(pose.valid for pose in poses)
-    three = sum(pose.valid and len(pose.used_landmarks) == 3 for pose in poses)
-    lines = [
-        f"frames: {len(records)}  valid poses: {valid} ({three} from three landmarks)  "
-        f"invalid: {len(records) - valid}"
-    ]
-    if out is not None:
-        out.parent.mkdir(parents=True, exist_ok=True)
-        written = write_tum(out, timestamps, positions, quaternions)
-        lines.append(f"poses written to {out} ({written} rows, TUM camera-to-world)")
-    if tracks is not None:
-        tracks.parent.mkdir(parents=True, exist_ok=True)
-        write_csv(tracks, _tracks_header(scene), _tracks_rows(records, timestamps, scene))
-        lines.append(f"per-frame tracks written to {tracks}")
-    if gt is not None:
-        gt_times, gt_positions, _ = gt
-        errors = trajectory_errors(timestamps, positions, gt_times, gt_positions)
-        lines.append(format_table3([(name, errors)]))
-        large = int(np.sum(errors.errors_cm > LARGE_ERROR_CM))
-        lines.append(f"valid frames more than {LARGE_ERROR_CM:g} cm off: {large}")
-    return "\n".join(lines)
-
-
-def smoothed_report(
-    records: OutcomeLog,
-    timestamps: np.ndarray,
-    path: Path,
-    smoother: Any,
-    gt: tuple[np.ndarray, np.ndarray, np.ndarray] | None,
-) -> str:
-    """Write the smoothed trajectory (`smoother`: SmootherParams) to `path` (TUM) and return
-    its report lines (with its errors against `gt`)."""
-    from autotrack.io.tum import write_tum
-    from autotrack.localization.smoothing import samples_from_poses, smooth_poses
-    from autotrack.localization.trajectory import trajectory_errors
-
-    samples = list(smooth_poses(samples_from_poses(records.poses), smoother))
-    positions = np.array([p.position for p in samples]).reshape(-1, 3)
-    quaternions = np.array([p.quaternion_xyzw for p in samples]).reshape(-1, 4)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    written = write_tum(path, timestamps, positions, quaternions)
-    lines = [
-        f"smoothed poses written to {path} ({written} rows, latency "
-        f"{smoother.lag_frames} frames = {smoother.latency_s:.2f} s)"
-    ]
-    if gt is not None:
-        errors = trajectory_errors(timestamps, positions, gt[0], gt[1])
-        lines.append(
-            f"smoothed: RMSE {errors.rmse_cm:.2f} cm, max {errors.max_error_cm:.2f} cm over "
-            f"{errors.frames} frames"
-        )
-    return "\n".join(lines)
-
-
-def _tracks_header(scene: Scene) -> list[str]:
-    """Columns of --tracks: pose (NaN when invalid), validity, landmarks used and left out
-    (why), reason when invalid, and per landmark its box, peak score, aberrance flag and
-    reprojection error; then per landmark the point given to the solver and whether it was
-    refined, and the frame's landmark events (out of view, re-acquired)."""
-    header = ["frame", "timestamp", "valid", "tx", "ty", "tz", "qx", "qy", "qz", "qw"]
-    header += ["rms_px", "position_std_m", "used", "excluded", "reason"]
-    for landmark_id in scene.landmark_ids:
-        header += [
-            f"{landmark_id}_{k}" for k in ("x", "y", "w", "h", "peak", "aberrant", "error_px")
-        ]
-    # The point given to the solver (refined or box centre) and what happened to the landmark.
-    for landmark_id in scene.landmark_ids:
-        header += [f"{landmark_id}_{k}" for k in ("u", "v", "refined")]
-    header.append("events")
-    return header
-
-
-def _tracks_rows(records: OutcomeLog, timestamps: np.ndarray, scene: Scene) -> Iterator[list[Any]]:
-    frame_indices = records.frame_indices
-    for row_index, (pose, stamp) in enumerate(zip(records.poses, timestamps, strict=True)):
-        row: list[Any] = [int(frame_indices[row_index]), f"{stamp:.6f}", int(pose.valid)]
-        row += [f"{v:.6f}" for v in pose.position]
-        row += [f"{v:.6f}" for v in pose.quaternion_xyzw()]
-        row += [f"{pose.rms_error_px:.3f}", f"{pose.position_std_m:.4f}"]
-        excluded = "; ".join(f"{k} {why}" for k, why in pose.excluded_landmarks.items())
-        row += [" ".join(pose.used_landmarks), excluded, pose.reason]
-        for landmark_id in scene.landmark_ids:
-            track = records.track(row_index, landmark_id)
-            if track is None:
-                row += ["nan"] * 6
-            else:
-                box, peak, aberrant = track
-                row += [f"{v:.2f}" for v in box]
-                row += [f"{peak:.4f}", int(aberrant)]
-            row.append(f"{pose.reprojection_errors.get(landmark_id, math.nan):.3f}")
-        points, refined = records.image_points(row_index), records.refined(row_index)
-        for landmark_id in scene.landmark_ids:
-            u, v = points.get(landmark_id, (math.nan, math.nan))
-            row += [f"{u:.3f}", f"{v:.3f}", int(refined.get(landmark_id, False))]
-        row.append("; ".join(f"{k} {what}" for k, what in records.events(row_index).items()))
-        yield row

@@ -73,6 +73,13 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
         default=None,
         help="ground-truth TUM for --evo (default: SOURCE/poses_gt.tum)",
     )
+    export.add_argument(
+        "--frames",
+        type=Path,
+        default=None,
+        metavar="DIR",
+        help="write the embedded frames to DIR as image files (their recorded bytes)",
+    )
     export.add_argument("--force", action="store_true", help="replace existing output files")
     export.set_defaults(func=run_export)
 
@@ -96,7 +103,7 @@ def session_summary(session: Session) -> dict[str, Any]:
         "format_version": session.format_version,
         "package_version": session.metadata.get("package_version"),
         "created_utc": session.metadata.get("created_utc"),
-        "source": session.metadata.get("source"),
+        "source": session.metadata.get("source"),  # as text (`path_text`)
         "scene_path": session.metadata.get("scene_path") or None,
         "fps": session.fps,
         "frames": session.frame_count,
@@ -111,6 +118,7 @@ def session_summary(session: Session) -> dict[str, Any]:
         "duration_s": session.duration_s,
         "wall_time_span_s": session.wall_time_span_s,
         "truncated": session.truncated,
+        "being_recorded": session.being_recorded,
         "bytes_read": session.bytes_read,
         "file_size": session.file_size,
     }
@@ -159,7 +167,12 @@ def _format_summary(summary: dict[str, Any]) -> str:
     lines.append(f"events    {events or 'none'}")
     if summary["embedded_frames"]:
         lines.append(f"images    {summary['embedded_frames']} embedded frames")
-    if summary["truncated"]:
+    if summary["being_recorded"]:
+        lines.append(
+            f"complete  not yet: being recorded; read {summary['messages']} messages from the "
+            f"first {summary['bytes_read']} of {summary['file_size']} bytes so far"
+        )
+    elif summary["truncated"]:
         lines.append(
             f"complete  NO: cut short (crash or interrupted copy); read {summary['messages']} "
             f"messages from the first {summary['bytes_read']} of {summary['file_size']} bytes"
@@ -184,10 +197,11 @@ def run_info(args: argparse.Namespace) -> int:
 
 
 def run_export(args: argparse.Namespace) -> int:
-    if not any(getattr(args, name) for name in ("tracks", "poses", "csv", "mot", "cvat")):
+    outputs = ("tracks", "poses", "csv", "mot", "cvat", "frames")
+    if not any(getattr(args, name) for name in outputs):
         raise SessionError(
-            "nothing to export: give --tracks DIR, --poses FILE, --csv FILE, --mot FILE "
-            "and/or --cvat FILE"
+            "nothing to export: give --tracks DIR, --poses FILE, --csv FILE, --mot FILE, "
+            "--cvat FILE and/or --frames DIR"
         )
     if args.evo and args.poses is None:
         raise SessionError("--evo prints the command for the exported poses: give --poses FILE")
@@ -201,7 +215,11 @@ def run_export(args: argparse.Namespace) -> int:
                 f"the session's source {session.metadata.get('source')} cannot be read here "
                 "to get the frame size CVAT needs: give --frame-size WIDTHxHEIGHT"
             )
-    if session.truncated:
+    if args.frames is not None and not session.image_count:
+        raise SessionError(f"{args.file} embeds no frames (it was recorded with --no-frames)")
+    if session.being_recorded:
+        print(f"note: {args.file} is still being recorded; exporting what was recorded so far")
+    elif session.truncated:
         print(f"note: {args.file} was cut short; exporting what was recorded before the cut")
     if args.tracks is not None:
         paths = write_otb_tracks(session, args.tracks, overwrite=args.force)
@@ -213,6 +231,11 @@ def run_export(args: argparse.Namespace) -> int:
         count = write_tum_poses(session, args.poses, overwrite=args.force)
         print(f"wrote {count} valid pose(s) to {args.poses}")
     _export_interchange(session, args)
+    if args.frames is not None:
+        from autotrack.sessions.frames import write_frames
+
+        count = write_frames(session, args.frames, force=args.force)
+        print(f"wrote {count} frame(s) to {args.frames}")
     return 0
 
 

@@ -9,7 +9,12 @@ from pathlib import Path
 import numpy as np
 from tqdm import tqdm
 
-from autotrack.cli.checks import check_output_file, init_box
+from autotrack.cli.checks import (
+    add_no_frames_argument,
+    check_output_file,
+    check_session_file,
+    init_box,
+)
 from autotrack.cli.live import add_live_arguments, check_source, run_track_live
 from autotrack.errors import InputError
 from autotrack.evaluation.datasets import GROUND_TRUTH_FILE
@@ -53,6 +58,15 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     )
     parser.add_argument("--out", type=Path, default=None, help="write boxes here (x,y,w,h rows)")
     parser.add_argument("--force", action="store_true", help="replace an existing --out file")
+    parser.add_argument(
+        "--session",
+        type=Path,
+        default=None,
+        metavar="FILE",
+        help="record the run to this new MCAP session file (never overwritten; see "
+        "`autotrack session`), the tracked frames embedded",
+    )
+    add_no_frames_argument(parser)
     parser.add_argument("--quiet", action="store_true", help="no progress bar")
     add_live_arguments(parser)
     parser.add_argument(
@@ -67,9 +81,12 @@ def _ground_truth(sequence: Path) -> np.ndarray | None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from autotrack.pipeline import Pipeline
+    from autotrack.pipeline import Pipeline, Recording
 
     check_output_file(args.out, "--out", force=args.force)
+    check_session_file(args.session)
+    if args.session is not None and args.realtime:
+        raise InputError("--session records sequences here; live runs: autotrack localize")
     if args.colour_table is not None and not args.colour_table.is_file():
         raise InputError(f"Color Names table not found: {args.colour_table}")
     check_source(args)
@@ -89,10 +106,16 @@ def run(args: argparse.Namespace) -> int:
     progress = tqdm(
         total=len(frames), unit="frame", desc=frames.name, disable=args.quiet or len(frames) < 50
     )
+    recording = None
+    if args.session is not None:
+        recording = Recording(
+            source=str(args.sequence), path=args.session, embed_frames=not args.no_frames
+        )
+    params = preset(args.preset, args.colour_table)
     with (
         frames,
         progress,
-        Pipeline(frames, preset(args.preset, args.colour_table), map_window=0) as pipeline,
+        Pipeline(frames, params, recording=recording, map_window=0) as pipeline,
     ):
         target_id = pipeline.add_target(0, tuple(first_box), landmark_id=None)
         for outcome in pipeline.run():
@@ -114,4 +137,6 @@ def run(args: argparse.Namespace) -> int:
         )
     if args.out is not None:
         print(f"boxes written to {args.out}")
+    if args.session is not None:
+        print(f"session recorded to {args.session}")
     return 0

@@ -104,11 +104,6 @@ def auc(success: np.ndarray) -> float:
     return float(np.mean(success))
 
 
-def precision_at(errors: np.ndarray, threshold: float = PRECISION_SCORE_THRESHOLD) -> float:
-    """Fraction of scored frames whose centre error is <= `threshold` pixels."""
-    return float(precision_curve(errors, np.array([threshold]))[0])
-
-
 @dataclass(frozen=True, eq=False)
 class SequenceScore:
     """OPE curves and scores of one tracker on one sequence."""

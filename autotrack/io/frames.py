@@ -18,6 +18,7 @@ from abc import ABC, abstractmethod
 from collections import OrderedDict
 from collections.abc import Iterator, Sequence
 from concurrent.futures import Future, ThreadPoolExecutor
+from dataclasses import dataclass
 from functools import cached_property
 from pathlib import Path
 
@@ -54,6 +55,26 @@ _CAPTURE_OPTIONS_LOCK = threading.Lock()
 
 VIDEO_CACHE_FRAMES = 16
 """Decoded video frames kept for backward steps without re-decoding."""
+_FILE_SIGNATURES = {b"\xff\xd8\xff": "jpeg", b"\x89PNG\r\n\x1a\n": "png"}
+"""The first bytes of the encoded formats a frame is embedded in as it is (`EncodedFrame`)."""
+
+
+@dataclass(frozen=True)
+class EncodedFrame:
+    """A frame as its file holds it, in a format any image viewer decodes."""
+
+    data: bytes
+    """The file's bytes."""
+    format: str
+    """"jpeg" or "png" (told by the bytes, not by the file name)."""
+
+    @classmethod
+    def of(cls, data: bytes) -> EncodedFrame | None:
+        """`data` as an EncodedFrame when it is JPEG or PNG, else None."""
+        for signature, image_format in _FILE_SIGNATURES.items():
+            if data.startswith(signature):
+                return cls(data, image_format)
+        return None
 
 
 def _frame_label(index: int) -> str:
@@ -99,12 +120,21 @@ def read_image(path: Path, index: int | None = None, *, bgr: bool = False) -> np
         encoded = np.fromfile(path, dtype=np.uint8)
     except OSError as error:
         raise InputError(f"{label}cannot read image file {path}: {error.strerror}") from error
+    image = decode_image(encoded, bgr=bgr)
+    if image is None:
+        raise InputError(f"{label}cannot decode image file {path} (corrupt or not an image)")
+    return image
+
+
+def decode_image(encoded: np.ndarray, *, bgr: bool = False) -> np.ndarray | None:
+    """Decode an encoded image (uint8 bytes) as a frame source reads its files: uint8 RGB (or
+    BGR), 2-D for single-channel images; None when it does not decode."""
     image = decode_jpeg(encoded, bgr=bgr)  # OpenCV's pixels, faster, already in order
     if image is not None:
         return image
     image = cv2.imdecode(encoded, cv2.IMREAD_ANYCOLOR) if encoded.size else None
     if image is None:
-        raise InputError(f"{label}cannot decode image file {path} (corrupt or not an image)")
+        return None
     if image.ndim == 3 and not bgr:
         # In place, on the array just decoded: the same pixels as a converted copy, without
         # allocating (and page-faulting in) a second frame: ~1.6 ms of CPU a 1280x720 frame.
@@ -122,6 +152,8 @@ class FrameSource(ABC):
     independent_reads: bool = False
     """Reading a frame touches no state another read uses, so `FrameCache` may decode the next
     frames on background threads, several at once (not a video: its decoder reads in order)."""
+    live: bool = False
+    """Frames of a live source (a camera, a stream), which cannot be read again later."""
 
     @abstractmethod
     def __len__(self) -> int:
@@ -156,6 +188,12 @@ class FrameSource(ABC):
         """The frame tracked before frame `index`: `index - 1` (a live source skips the frames
         it dropped)."""
         return index - 1
+
+    def encoded(self, index: int) -> EncodedFrame | None:
+        """Frame `index` as its file holds it when that is a JPEG or PNG file (a recording
+        embeds those bytes as they are), else None (the frame is only available decoded)."""
+        self._check_index(index)
+        return None
 
     def __iter__(self) -> Iterator[np.ndarray]:
         for index in range(len(self)):
@@ -195,6 +233,17 @@ class ImageSequence(FrameSource):
         place as it is decoded (`read_image`)."""
         index = self._check_index(index)
         return read_image(self.paths[index], index)
+
+    def encoded(self, index: int) -> EncodedFrame | None:
+        """The frame's file as it is, when it is JPEG or PNG (None for BMP, TIFF, WebP)."""
+        path = self.paths[self._check_index(index)]
+        try:
+            data = path.read_bytes()
+        except OSError as error:
+            raise InputError(
+                f"{_frame_label(index)}: cannot read image file {path}: {error.strerror}"
+            ) from error
+        return EncodedFrame.of(data)
 
     def close(self) -> None:
         """Nothing to release: each read opens and closes its file."""
@@ -409,7 +458,7 @@ class FrameCache:
 READ_AHEAD_FRAMES = 3
 """Frames a `FrameCache` decodes ahead of the caller: with two tracking processes on two cores,
 three let the decoding fill idle time that one frame ahead leaves unused (71.1 against 69.7
-frames/s, docs/benchmarks.md, round 19); six gave no more."""
+frames/s, docs/history.md, round 19); six gave no more."""
 
 READ_AHEAD_THREADS = 2
 """Threads decoding the frames read ahead: two can fill idle time on both cores at once

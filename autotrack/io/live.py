@@ -345,6 +345,8 @@ class LiveFrames(FrameSource):
     the next.
     """
 
+    live = True
+
     def __init__(self, name: str, fps: float | None, keep: int = 8) -> None:
         self.name = name
         self.fps = fps

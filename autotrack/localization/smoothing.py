@@ -192,10 +192,10 @@ class PoseSmoother:
         return _Step(sample, mean_pred, cov_pred, mean, cov)
 
     def _smoothed_oldest(self) -> PoseSample:
-        """RTS backward pass over the window down to its oldest step."""
+        """RTS backward pass of the means over the window down to its oldest step (the output
+        is a pose, so the smoothed covariance, which the means do not need, is not formed)."""
         steps = list(self._window)
         mean = steps[-1].mean
-        cov = steps[-1].cov
         for k in range(len(steps) - 2, -1, -1):
             current, following = steps[k], steps[k + 1]
             dt = (following.sample.frame_index - current.sample.frame_index) / self.params.fps
@@ -203,7 +203,6 @@ class PoseSmoother:
             # C = P_k F^T (P_{k+1|k})^-1, per coordinate
             gain = current.cov @ transition.T @ np.linalg.inv(following.cov_pred)
             mean = current.mean + np.einsum("nij,nj->ni", gain, mean - following.mean_pred)
-            cov = current.cov + gain @ (cov - following.cov_pred) @ np.transpose(gain, (0, 2, 1))
         oldest = steps[0].sample
         if not oldest.valid:
             return oldest

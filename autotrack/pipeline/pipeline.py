@@ -31,7 +31,6 @@ from autotrack.params import TrackerParams
 from autotrack.pipeline.groups import TrackerGroups
 from autotrack.pipeline.posing import LandmarkEntry, PoseStage
 from autotrack.pipeline.recording import Recording, open_recorder
-from autotrack.pipeline.resume import restore
 from autotrack.pipeline.targets import (
     FrameOutcome,
     TrackedTarget,
@@ -39,6 +38,7 @@ from autotrack.pipeline.targets import (
     checked_box,
     free_numbers,
     grown,
+    number_of,
 )
 from autotrack.result import PoseEstimate, TrackResult
 from autotrack.sessions import Session, SessionRecorder
@@ -155,8 +155,55 @@ class Pipeline:
             **pose_options,
         )
         pipeline.resumed_from = session.path
-        restore(pipeline, session)
+        pipeline._restore(session)
         return pipeline
+
+    def _restore(self, session: Session) -> None:
+        """Make `session`'s results and poses this pipeline's history and restart every live
+        target from its last recorded box."""
+        live = {
+            target_id: target
+            for target_id, target in session.recorded_targets().items()
+            if target.last_box is not None and 0 <= target.last_box[0] < self.frame_count
+        }
+        restarts: dict[int, dict[str, Box]] = {}
+        for target_id, recorded in live.items():
+            frame_index, box = recorded.last_box
+            restarts.setdefault(frame_index, {})[target_id] = box
+        resume_frame = min(restarts, default=0)
+        for position, (target_id, recorded) in enumerate(live.items()):
+            landmark = recorded.landmark_id
+            if self.scene is None or landmark not in self.scene.landmark_ids:
+                landmark = None
+            number = number_of(target_id, position + 1)
+            target = TrackedTarget.new(target_id, number, landmark, self.frame_count)
+            self.targets[target_id] = target
+            for frame_index, result in sorted(recorded.results.items()):
+                if frame_index <= recorded.last_box[0]:
+                    self._store(target, result)
+        recorded_poses = session.pose_estimates()
+        for frame_index, pose in sorted(recorded_poses.items()):
+            if frame_index < resume_frame:
+                self._keep_pose(pose)
+        for frame_index, boxes in sorted(restarts.items()):
+            started = self._timed_start(frame_index, boxes)
+            for target_id, result in started.items():
+                target = self.targets[target_id]
+                self._restart(target, target.results.get(frame_index, result))
+        # The restarts solved the resume frame again from its recorded boxes, with a localiser
+        # that has no history (no continuity prior, no peak scores): the recorded pose is the
+        # one the session showed there, so it stays.
+        if resume_frame in recorded_poses and resume_frame in self.poses:
+            self._keep_pose(recorded_poses[resume_frame])
+        self.resume_frame = resume_frame
+        self._log_event("session_resumed", resume_frame, None, source=str(session.path))
+
+    def _keep_pose(self, pose: PoseEstimate) -> None:
+        """A recorded pose becomes this pipeline's (and the new recording's) pose of its frame."""
+        self.poses[pose.frame_index] = pose
+        recorder = self._recorder_or_none()
+        if recorder is not None:
+            recorder.log_pose(pose)
 
     # -- frames -------------------------------------------------------------------------------
 
@@ -170,6 +217,12 @@ class Pipeline:
     def session_path(self) -> Path | None:
         """The recording's file (None until the first edit, or when not recording)."""
         return None if self._recorder is None else self._recorder.path
+
+    @property
+    def recording_error(self) -> OSError | None:
+        """The write that stopped the recording (a full disk, ...; `SessionRecorder.write_error`):
+        the file keeps what was recorded before it; None while recording works."""
+        return None if self._recorder is None else self._recorder.write_error
 
     def flush(self) -> None:
         """Hand everything recorded so far to the OS (e.g. before exporting the session)."""
@@ -191,21 +244,24 @@ class Pipeline:
             if self.scene is not None:
                 landmark_positions(self.scene)  # its ids are refused before the file exists
             self._recorder = open_recorder(
-                self.recording, self.params, self.fps, self.resumed_from, self.frames.name
+                self.recording, self.params, self.fps, self.resumed_from, self.frames
             )
             if self.scene is not None:
                 self._recorder.log_landmarks(self.scene)
         return self._recorder
 
     def _embed_frame(self, frame_index: int) -> None:
-        """The frame itself into the recording, once, when the recording embeds frames."""
+        """The frame itself into the recording, once, when the recording embeds frames: a JPEG
+        or PNG file's bytes as they are, any other frame encoded once as JPEG."""
         recorder = self._recorder_or_none()
-        if (
-            recorder is not None
-            and frame_index not in self._embedded
-            and recorder.log_frame(frame_index, self.frame(frame_index))
-        ):
-            self._embedded.add(frame_index)
+        if recorder is None or not recorder.embed_frames or frame_index in self._embedded:
+            return
+        encoded = self.frames.encoded(frame_index)
+        if encoded is not None:
+            recorder.log_encoded_frame(frame_index, encoded.data, encoded.format)
+        else:
+            recorder.log_frame(frame_index, self.frame(frame_index))
+        self._embedded.add(frame_index)
 
     def _log_event(self, kind: str, frame_index: int, target_id: str | None, **extra: Any) -> None:
         recorder = self._recorder_or_none()

@@ -6,6 +6,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from autotrack.errors import InputError
+from autotrack.io.frames import FrameSource
 from autotrack.params import TrackerParams
 from autotrack.sessions import SessionRecorder
 
@@ -26,8 +27,10 @@ class Recording:
     """The scene file, recorded in the metadata and attached."""
     record_maps: bool = True
     """Record each target's response and local-variation maps and spatial weights (mono8)."""
-    embed_frames: bool = False
-    """Record every tracked frame as JPEG too (large)."""
+    embed_frames: bool = True
+    """Embed every tracked frame on the camera topic, so the recording replays as the annotated
+    video (a JPEG or PNG file's bytes as they are, other frames encoded once as JPEG); about as
+    large as the frames' files. False: boxes, signals, maps and poses only."""
 
 
 def open_recorder(
@@ -35,7 +38,7 @@ def open_recorder(
     params: TrackerParams,
     fps: float | None,
     resumed_from: Path | None,
-    frames_name: str,
+    frames: FrameSource,
 ) -> SessionRecorder:
     """A new SessionRecorder for `recording` (the file is created here)."""
     options = {
@@ -46,11 +49,12 @@ def open_recorder(
         "resumed_from": resumed_from,
         "record_maps": recording.record_maps,
         "embed_frames": recording.embed_frames,
+        "live_source": frames.live,
     }
     if recording.path is not None:
         return SessionRecorder(recording.path, **options)
     if recording.directory is None:
         raise InputError("a recording needs a directory or a path")
     return SessionRecorder.create(
-        recording.directory, name=recording.name or frames_name, **options
+        recording.directory, name=recording.name or frames.name, **options
     )

@@ -8,7 +8,7 @@ the evo command).
 
 from autotrack.sessions.exports import write_otb_tracks, write_tracks_csv, write_tum_poses
 from autotrack.sessions.reader import open_session
-from autotrack.sessions.recorder import SessionRecorder
+from autotrack.sessions.recorder import SessionRecorder, SessionWriteError
 from autotrack.sessions.session import PoseTrack, RecordedTarget, Session, SessionEvent
 
 __all__ = [
@@ -17,6 +17,7 @@ __all__ = [
     "Session",
     "SessionEvent",
     "SessionRecorder",
+    "SessionWriteError",
     "open_session",
     "write_otb_tracks",
     "write_tracks_csv",

@@ -16,13 +16,30 @@ from autotrack.io.frames import open_frames
 from autotrack.io.mot import write_mot
 from autotrack.io.otb_boxes import write_boxes
 from autotrack.io.tum import write_tum
+from autotrack.sessions.names import safe_file_name
 from autotrack.sessions.session import Session
+
+
+def target_label(session: Session, target_id: str) -> str:
+    """How the exports name a target: its id, with the landmark it localises beside it
+    ("T1 (A)"), or the id alone."""
+    landmark = session.landmark_ids.get(target_id)
+    return target_id if landmark is None else f"{target_id} ({landmark})"
+
+
+def track_file_name(session: Session, target_id: str) -> str:
+    """The OTB track file of a target: `T1.txt`, or `T1_A.txt` for a target that localises
+    landmark A (the landmark reduced to letters, digits, '_', '.' and '-')."""
+    landmark = session.landmark_ids.get(target_id)
+    stem = target_id if landmark is None else safe_file_name(f"{target_id}_{landmark}")
+    return f"{stem}.txt"
 
 
 def write_otb_tracks(
     session: Session, directory: str | Path, *, overwrite: bool = False
 ) -> list[Path]:
-    """One `<target>.txt` per target in the benchmark format (autotrack.datasets.write_boxes):
+    """One `<target>.txt` per target (`<target>_<landmark>.txt` for a target that localises a
+    landmark, `track_file_name`) in the benchmark format (autotrack.io.otb_boxes.write_boxes):
     a line `x,y,w,h` per frame 0..last, 1-BASED x and y, `NaN` where the target has no box.
     Targets the user deleted are not written."""
     directory = Path(directory)
@@ -31,7 +48,7 @@ def write_otb_tracks(
     except OSError as error:
         raise SessionError(f"cannot create {directory}: {error}") from error
     targets = session.exported_targets
-    paths = [directory / f"{target_id}.txt" for target_id in targets]
+    paths = [directory / track_file_name(session, target_id) for target_id in targets]
     taken = [str(path) for path in paths if path.exists()]
     if taken and not overwrite:
         raise SessionError(
@@ -47,8 +64,9 @@ def write_otb_tracks(
 
 
 def write_tracks_csv(session: Session, path: str | Path, *, overwrite: bool = False) -> Path:
-    """Combined CSV: frame (0-based), target, x, y, w, h (0-based pixels), score, aberrant (0/1);
-    one row per frame and target with a box, ordered by frame then target."""
+    """Combined CSV: frame (0-based), target, landmark (the one it localises, else empty), x, y,
+    w, h (0-based pixels), score, aberrant (0/1); one row per frame and target with a box,
+    ordered by frame then target."""
     rows = []
     targets = session.exported_targets
     for frame_index in session.frame_indices.tolist():
@@ -58,8 +76,9 @@ def write_tracks_csv(session: Session, path: str | Path, *, overwrite: bool = Fa
                 continue
             score = float(session.scores[target_id][frame_index])
             flag = int(session.aberrant[target_id][frame_index])
-            rows.append([frame_index, target_id, *(float(v) for v in box), score, flag])
-    header = ["frame", "target", "x", "y", "w", "h", "score", "aberrant"]
+            landmark = session.landmark_ids.get(target_id) or ""
+            rows.append([frame_index, target_id, landmark, *(float(v) for v in box), score, flag])
+    header = ["frame", "target", "landmark", "x", "y", "w", "h", "score", "aberrant"]
     try:
         return write_csv(path, header, rows, overwrite=overwrite)
     except FileExistsError as error:
@@ -112,7 +131,7 @@ def session_keyframes(session: Session) -> dict[str, set[int]]:
 def session_frame_size(session: Session) -> tuple[int, int] | None:
     """(width, height) of the session's source frames, or None when the source is not readable
     here (then CVAT's <original_size> is left out)."""
-    source = session.metadata.get("source")
+    source = session.source
     if not source:
         return None
     try:
@@ -128,14 +147,16 @@ def _refuse_existing(path: Path, overwrite: bool) -> None:
 
 
 def export_session_mot(session: Session, path: str | Path, *, overwrite: bool = False) -> dict:
-    """The session's tracks (deleted targets left out) as a MOT Challenge file; returns target
-    id -> MOT id."""
+    """The session's tracks (deleted targets left out) as a MOT Challenge file; returns each
+    target's label (`target_label`: its id, and the landmark it localises) -> MOT id."""
     path = Path(path)
     _refuse_existing(path, overwrite)
-    targets = session.exported_targets
+    labels = {target_label(session, t): t for t in session.exported_targets}
     try:
         return write_mot(
-            path, {t: session.tracks[t] for t in targets}, {t: session.scores[t] for t in targets}
+            path,
+            {label: session.tracks[t] for label, t in labels.items()},
+            {label: session.scores[t] for label, t in labels.items()},
         )
     except OSError as error:
         raise SessionError(f"cannot write {path}: {error}") from error
@@ -149,8 +170,9 @@ def export_session_cvat(
     all_keyframes: bool = False,
     frame_size: tuple[int, int] | None = None,
 ) -> Path:
-    """The session's tracks as CVAT for video 1.1 XML, the user's drawn and corrected frames as
-    keyframes (every box with `all_keyframes`).
+    """The session's tracks as CVAT for video 1.1 XML, each labelled `target_label` (its id and
+    the landmark it localises), the user's drawn and corrected frames as keyframes (every box
+    with `all_keyframes`).
 
     `frame_size` (width, height) defaults to the size of the session's source frames; CVAT's
     readers need it (<original_size>), so SessionError when neither is available.
@@ -158,17 +180,19 @@ def export_session_cvat(
     path = Path(path)
     _refuse_existing(path, overwrite)
     frame_size = frame_size or session_frame_size(session)
-    source = str(session.metadata.get("source") or session.path.stem)
+    source = session.source or session.path.stem
     if frame_size is None:
         raise SessionError(
             f"the session's source {source} cannot be read here to get the frame size CVAT "
             "needs: give --frame-size WIDTHxHEIGHT"
         )
+    labels = {target_label(session, t): t for t in session.exported_targets}
+    keyframes = session_keyframes(session)
     try:
         return write_cvat_video(
             path,
-            {t: session.tracks[t] for t in session.exported_targets},
-            keyframes=session_keyframes(session),
+            {label: session.tracks[t] for label, t in labels.items()},
+            keyframes={label: keyframes.get(t, set()) for label, t in labels.items()},
             all_keyframes=all_keyframes,
             frame_size=frame_size,
             task_name=Path(source).name or source,
@@ -185,7 +209,7 @@ def evo_ape_command(session: Session, poses: str | Path, ground_truth: str | Pat
     there is none.
     """
     if ground_truth is None:
-        source = session.metadata.get("source")
+        source = session.source
         candidate = Path(source) / GROUND_TRUTH_POSES_FILE if source else None
         if candidate is None or not candidate.is_file():
             raise SessionError(

@@ -97,11 +97,6 @@ class SessionMaps:
                 f"{self.path} is corrupted ({type(error).__name__}: {error})"
             ) from error
 
-    @property
-    def chunks_indexed(self) -> int:
-        """Chunks with target messages the index knows."""
-        return len(self._spans)
-
     # -- the index ----------------------------------------------------------------------------
 
     def _extend_index(self, handle: BinaryIO) -> None:

@@ -3,20 +3,16 @@
 from __future__ import annotations
 
 import base64
-import io
 import json
 import math
 import os
-import struct
-from collections.abc import Iterator, Mapping
+from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, BinaryIO
+from typing import Any
 
 import numpy as np
-from mcap.exceptions import EndOfFile
-from mcap.records import Attachment, Channel, Chunk, DataEnd, Message, Metadata, Schema
-from mcap.stream_reader import StreamReader
+from mcap.records import Attachment, Channel, Message, Metadata, Schema
 
 import autotrack
 from autotrack.errors import SessionError
@@ -28,68 +24,13 @@ from autotrack.sessions.encoding import (
     dequantise_map,
     none_to_nan,
 )
-from autotrack.sessions.limits import DECODE_ERRORS, checked_frame_index, chunk_records
+from autotrack.sessions.limits import DECODE_ERRORS, checked_frame_index
+from autotrack.sessions.output import recording_in_progress
+from autotrack.sessions.records import iter_records, scan_records
 from autotrack.sessions.schemas import TargetStream, TargetTopic, Topics
 from autotrack.sessions.session import PoseTrack, Session, SessionEvent
 
-_MCAP_MAGIC = b"\x89MCAP0\r\n"
-_OPCODE_FOOTER = 0x02
-_OPCODE_DATA_END = 0x0F
-_KNOWN_OPCODES = frozenset(range(0x01, 0x10))
 _SIGNAL_NAMES = ("theta_ref", "theta", "global_variation", "scale_factor")
-
-
-class _PrefixReader(io.RawIOBase):
-    """Read-only view of the first `limit` bytes of a binary file."""
-
-    def __init__(self, handle: BinaryIO, limit: int) -> None:
-        self._handle = handle
-        self._remaining = limit
-
-    def readable(self) -> bool:
-        return True
-
-    def readinto(self, buffer: Any) -> int:
-        view = memoryview(buffer)
-        wanted = min(len(view), self._remaining)
-        if wanted <= 0:
-            return 0
-        data = self._handle.read(wanted)
-        view[: len(data)] = data
-        self._remaining -= len(data)
-        return len(data)
-
-
-def _scan_records(handle: BinaryIO, size: int, name: str) -> tuple[int, bool]:
-    """Walk the top-level records: (end of the last complete data-section record, file complete).
-
-    A record whose length runs past the end of the file is where the file was cut.
-    """
-    handle.seek(0)
-    if handle.read(len(_MCAP_MAGIC)) != _MCAP_MAGIC:
-        raise SessionError(f"{name} is not an MCAP file (it does not start with the MCAP magic)")
-    offset = len(_MCAP_MAGIC)
-    data_end = offset
-    in_data_section = True
-    while size - offset >= 9:
-        handle.seek(offset)
-        opcode, length = struct.unpack("<BQ", handle.read(9))
-        if opcode not in _KNOWN_OPCODES and opcode < 0x80:
-            raise SessionError(
-                f"{name} is corrupted: unknown record type 0x{opcode:02x} at byte {offset}"
-            )
-        end = offset + 9 + length
-        if end > size:
-            break
-        if opcode == _OPCODE_FOOTER:
-            handle.seek(end)
-            return data_end, handle.read(len(_MCAP_MAGIC)) == _MCAP_MAGIC
-        if in_data_section:
-            data_end = end
-        if opcode == _OPCODE_DATA_END:
-            in_data_section = False
-        offset = end
-    return data_end, False
 
 
 class _SessionBuilder:
@@ -207,7 +148,9 @@ class _SessionBuilder:
         elif event.box is not None and all(math.isfinite(v) for v in event.box):
             self.last_boxes[event.target_id] = (event.frame_index, event.box)
 
-    def build(self, path: Path, truncated: bool, bytes_read: int, file_size: int) -> Session:
+    def build(
+        self, path: Path, truncated: bool, bytes_read: int, file_size: int, being_recorded: bool
+    ) -> Session:
         assert self.metadata is not None
         metadata: dict[str, Any] = dict(self.metadata)
         fps = float(metadata.get("fps", DEFAULT_FPS))
@@ -258,6 +201,7 @@ class _SessionBuilder:
             file_size=file_size,
             scene_attachment=self.scene_attachment,
             partial_frame=self._partial_last_frame() if truncated else None,
+            being_recorded=being_recorded,
         )
 
     def _partial_last_frame(self) -> int | None:
@@ -380,23 +324,6 @@ class _TargetColumns:
         return cls(boxes, scores, aberrant, signals, search_boxes, landmark_id, times)
 
 
-def _iter_records(handle: BinaryIO, limit: int) -> Iterator[Any]:
-    handle.seek(0)
-    reader = StreamReader(_PrefixReader(handle, limit), validate_crcs=True, emit_chunks=True)
-    records = reader.records
-    while True:
-        try:
-            record = next(records)
-        except (StopIteration, EndOfFile):
-            return
-        if isinstance(record, Chunk):
-            yield from chunk_records(record)
-        else:
-            yield record
-        if isinstance(record, DataEnd):
-            return
-
-
 def open_session(path: str | Path, *, load_maps: bool = False) -> Session:
     """Read a session file, also one cut short by a crash (`Session.truncated`).
 
@@ -415,10 +342,11 @@ def open_session(path: str | Path, *, load_maps: bool = False) -> Session:
         size = os.fstat(handle.fileno()).st_size
         if size == 0:
             raise SessionError(f"{name} is empty: not an MCAP file")
-        limit, complete = _scan_records(handle, size, name)
+        limit, complete = scan_records(handle, size, name)
+        being_recorded = not complete and recording_in_progress(handle)
         builder = _SessionBuilder(load_maps)
         try:
-            for record in _iter_records(handle, limit):
+            for record in iter_records(handle, limit):
                 builder.add(record)
                 if isinstance(record, Metadata) and record.name == SESSION_METADATA_NAME:
                     _check_version(builder.metadata or {}, name)
@@ -441,7 +369,13 @@ def open_session(path: str | Path, *, load_maps: bool = False) -> Session:
             f"(no '{SESSION_METADATA_NAME}' metadata record)"
         )
     try:
-        return builder.build(path, truncated=not complete, bytes_read=limit, file_size=size)
+        return builder.build(
+            path,
+            truncated=not complete,
+            bytes_read=limit,
+            file_size=size,
+            being_recorded=being_recorded,
+        )
     except SessionError as error:
         raise SessionError(f"{name} is corrupted: {error}") from error
     except DECODE_ERRORS as error:
@@ -462,10 +396,6 @@ def _check_version(metadata: Mapping[str, str], name: str) -> None:
             f"({autotrack.__version__}) reads format versions up to {FORMAT_VERSION}: "
             "upgrade autotrack-studio to open it"
         )
-
-
-class _SessionFileExistsError(SessionError):
-    """The session file to create already exists."""
 
 
 class _NewerFormatError(SessionError):

@@ -14,10 +14,9 @@ last `flush_interval` (1 s) of records; `open_session` reads everything before t
 from __future__ import annotations
 
 import math
-import os
 import threading
 import time
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from datetime import UTC, datetime
 from pathlib import Path
 from types import TracebackType
@@ -37,13 +36,14 @@ from autotrack.sessions.encoding import (
     encode_json,
     frame_time_ns,
 )
-from autotrack.sessions.metadata import params_dict, session_metadata
+from autotrack.sessions.metadata import params_dict, path_text, session_metadata
 from autotrack.sessions.names import (
     check_event_kind,
     check_landmark_id,
     check_target_id,
     safe_file_name,
 )
+from autotrack.sessions.output import SessionFile
 from autotrack.sessions.schemas import (
     CAMERA_FRAME,
     MESSAGE_ENCODING,
@@ -54,6 +54,8 @@ from autotrack.sessions.schemas import (
     schema_bytes,
 )
 
+EMBEDDED_IMAGE_FORMATS = ("jpeg", "png")
+"""The encodings of embedded frames (foxglove.CompressedImage formats every viewer decodes)."""
 DEFAULT_FLUSH_INTERVAL_S = 1.0
 """Longest time a recorded message waits in memory before it reaches the OS (seconds)."""
 _PALETTE: tuple[tuple[float, float, float, float], ...] = (
@@ -93,6 +95,7 @@ class SessionRecorder:
         flush_interval: float = DEFAULT_FLUSH_INTERVAL_S,
         fsync: bool = False,
         resumed_from: str | Path | None = None,
+        live_source: bool = False,
     ) -> None:
         """Create the session file at exactly `path`; an existing file is never overwritten.
 
@@ -100,13 +103,16 @@ class SessionRecorder:
         tracker_params: the parameters of the tracker(s) of this session.
         scene_path: localisation scene file; recorded by name and embedded as an attachment.
         fps: frame rate of the source; log times are frame_index / fps (DEFAULT_FPS if None).
-        embed_frames: record the video frames as JPEG (`log_frame`); large, off by default.
+        embed_frames: record the video frames (`log_frame`, `log_encoded_frame`) on the camera
+            topic; off unless asked for here (a pipeline's `Recording` asks by default).
         record_maps: record the response and local-variation maps and the spatial weights
             (log10), mono8, ~2.5 kB each.
         jpeg_quality: JPEG quality of embedded frames (0-100).
         flush_interval: longest time (s) a message waits in memory before reaching the OS.
         fsync: also fsync the file at each flush (survives power loss, slower).
         resumed_from: the session this one continues, if any.
+        live_source: the frames come from a live source (a camera, a stream): a reopened
+            session is looked through on its embedded frames (`Session.recorded_live`).
         """
         if fps is not None and not (math.isfinite(fps) and fps > 0):
             raise SessionError(f"fps must be a positive number, got {fps}")
@@ -134,8 +140,9 @@ class SessionRecorder:
             record_maps=self.record_maps,
             flush_interval=self.flush_interval,
             resumed_from=resumed_from,
+            live_source=live_source,
         )
-        self._file: BinaryIO = _create_file(self.path)
+        self._file = SessionFile(_create_file(self.path), self.path, fsync=self._fsync)
         self._lock = threading.Lock()
         self._writer = Writer(
             self._file, compression=CompressionType.ZSTD, enable_crcs=True, enable_data_crcs=True
@@ -145,11 +152,8 @@ class SessionRecorder:
         self._target_colours: dict[str, tuple[float, float, float, float]] = {}
         self._sequence = 0
         self._pending_since: float | None = None
-        self._pending_max_frame: int | None = None
-        self._saved_frame_index: int | None = None
-        self._flush_error: BaseException | None = None
         self._closed = False
-        self._start(None if scene_path is None else Path(scene_path).name, scene_bytes)
+        self._start(None if scene_path is None else path_text(Path(scene_path).name), scene_bytes)
         self._stop = threading.Event()
         self._flusher = threading.Thread(
             target=self._flush_loop, name=f"session-flush-{self.path.name}", daemon=True
@@ -189,16 +193,6 @@ class SessionRecorder:
 
     # -- public logging API --------------------------------------------------------------------
 
-    @property
-    def saved_frame_index(self) -> int | None:
-        """Highest frame index with records that reached the OS (survive a crash), or None.
-
-        Records reach the file in the order they were logged, so everything logged before them
-        (all earlier frames, when frames are logged in order) is saved too.
-        """
-        with self._lock:
-            return self._saved_frame_index
-
     def log_target(
         self, target_id: str, result: TrackResult, *, landmark_id: str | None = None
     ) -> None:
@@ -220,7 +214,7 @@ class SessionRecorder:
             record_maps=self.record_maps,
             rgba=_ABERRANT_RGBA if result.aberrant else rgba,
         )
-        self._write(batch, time_ns, int(result.frame_index))
+        self._write(batch, time_ns)
 
     def log_no_result(
         self, target_id: str, frame_index: int, *, landmark_id: str | None = None
@@ -279,7 +273,7 @@ class SessionRecorder:
         message = messages.event_message(
             time_ns, str(kind), int(frame_index), target_id, box, extra, wall_time=time.time()
         )
-        self._write([message], time_ns, int(frame_index), flush_now=True)
+        self._write([message], time_ns, flush_now=True)
 
     def log_pose(self, pose: messages.PoseLike) -> None:
         """Record the camera pose of one frame: quality always; PoseInFrame and /tf when valid.
@@ -290,10 +284,11 @@ class SessionRecorder:
         """
         frame_index = int(pose.frame_index)
         time_ns = frame_time_ns(frame_index, self.fps)
-        self._write(messages.pose_messages(time_ns, pose), time_ns, frame_index)
+        self._write(messages.pose_messages(time_ns, pose), time_ns)
 
     def log_frame(self, frame_index: int, image_rgb: np.ndarray) -> bool:
-        """Record a video frame as JPEG (foxglove.CompressedImage) if embed_frames is on.
+        """Record a decoded video frame, encoded once as JPEG (`jpeg_quality`), on the camera
+        topic (foxglove.CompressedImage, frame `camera`) if embed_frames is on.
 
         Returns True when the frame was recorded, False when embedding is off.
         """
@@ -308,9 +303,21 @@ class SessionRecorder:
         ok, encoded = cv2.imencode(".jpg", bgr, [cv2.IMWRITE_JPEG_QUALITY, self.jpeg_quality])
         if not ok:
             raise SessionError(f"frame {frame_index}: JPEG encoding failed")
+        return self.log_encoded_frame(frame_index, encoded.tobytes(), "jpeg")
+
+    def log_encoded_frame(self, frame_index: int, data: bytes, image_format: str) -> bool:
+        """Record a video frame already encoded (a JPEG or PNG file's bytes, as they are) on the
+        camera topic if embed_frames is on; returns whether it was recorded."""
+        if image_format not in EMBEDDED_IMAGE_FORMATS:
+            raise SessionError(
+                f"frame {frame_index}: embedded frames are {' or '.join(EMBEDDED_IMAGE_FORMATS)}, "
+                f"not {image_format!r}"
+            )
+        if not self.embed_frames:
+            return False
         time_ns = frame_time_ns(frame_index, self.fps)
-        message = messages.compressed_image(time_ns, CAMERA_FRAME, encoded.tobytes(), "jpeg")
-        self._write([(Topics.IMAGE, message)], time_ns, int(frame_index))
+        message = messages.compressed_image(time_ns, CAMERA_FRAME, bytes(data), image_format)
+        self._write([(Topics.IMAGE, message)], time_ns)
         return True
 
     def log_landmarks(
@@ -329,29 +336,37 @@ class SessionRecorder:
             marker_size = 0.02 * extent if extent > 0 else 0.1
         time_ns = frame_time_ns(frame_index, self.fps)
         update = messages.landmark_scene_update(time_ns, WORLD_FRAME, landmarks, marker_size)
-        self._write([(Topics.LANDMARKS, update)], time_ns, None, flush_now=True)
+        self._write([(Topics.LANDMARKS, update)], time_ns, flush_now=True)
+
+    @property
+    def write_error(self) -> OSError | None:
+        """The write that failed (a full disk, ...), None while every write succeeded. After it
+        nothing more is written to the file, which keeps every record flushed before it and
+        reads as a session cut short; every later call raises SessionWriteError."""
+        return self._file.error
 
     def flush(self) -> None:
         """Hand everything recorded so far to the OS now."""
         with self._lock:
             self._raise_if_unusable()
-            self._flush_locked()
+            self._guarded(self._flush_locked)
 
     def close(self) -> None:
-        """Write the summary and footer and close the file. Safe to call twice."""
+        """Write the summary and footer and close the file. Safe to call twice, and after a
+        failed write (the file then stays as it was cut, and close does not raise again)."""
         if self._closed:
             return
         self._stop.set()
         self._flusher.join()
         with self._lock:
             self._closed = True
+            if self._file.error is not None:
+                return
             try:
                 self._writer.finish()
                 self._file.flush()
-                if self._fsync:
-                    os.fsync(self._file.fileno())
             except OSError as error:
-                raise SessionError(f"cannot finish session file {self.path}: {error}") from error
+                raise self._failed(error) from error
             finally:
                 self._file.close()
 
@@ -379,18 +394,33 @@ class SessionRecorder:
                     now, 0, scene_name, "application/octet-stream", scene_bytes
                 )
             self._writer.flush()
-        except OSError as error:
+        except BaseException as error:
             self._file.close()
             self.path.unlink(missing_ok=True)  # a header cut short holds nothing: no orphan
-            raise SessionError(f"cannot write session file {self.path}: {error}") from error
+            if isinstance(error, OSError):
+                raise SessionError(f"cannot write session file {self.path}: {error}") from error
+            raise
 
     def _raise_if_unusable(self) -> None:
+        if self._file.error is not None:
+            raise self._failed(self._file.error) from self._file.error
         if self._closed:
             raise SessionError(f"session {self.path.name} is closed")
-        if self._flush_error is not None:
-            raise SessionError(
-                f"writing session {self.path} failed: {self._flush_error}"
-            ) from self._flush_error
+
+    def _failed(self, error: OSError) -> SessionWriteError:
+        return SessionWriteError(
+            f"writing session {self.path} failed ({error.strerror or error}): recording "
+            f"stopped; the file keeps everything recorded before "
+            f"({self._file.flushed_bytes} bytes, readable as a session cut short)"
+        )
+
+    def _guarded(self, write: Callable[[], None]) -> None:
+        """Run a write of the file; a failure becomes SessionWriteError (the file is then cut
+        back to its last complete flush and written no more, `SessionFile`)."""
+        try:
+            write()
+        except OSError as error:
+            raise self._failed(error) from error
 
     def _channel_id(self, topic: Topic) -> int:
         channel_id = self._channel_ids.get(topic.name)
@@ -406,52 +436,36 @@ class SessionRecorder:
         return channel_id
 
     def _write(
-        self,
-        batch: list[messages.Message],
-        time_ns: int,
-        frame_index: int | None,
-        *,
-        flush_now: bool = False,
+        self, batch: list[messages.Message], time_ns: int, *, flush_now: bool = False
     ) -> None:
         encoded = [(topic, encode_json(payload)) for topic, payload in batch]
         with self._lock:
             self._raise_if_unusable()
             publish_ns = time.time_ns()
-            try:
+
+            def add_and_maybe_flush() -> None:
                 for topic, data in encoded:
                     self._sequence += 1
                     self._writer.add_message(
-                        self._channel_id(topic),
-                        time_ns,
-                        data,
-                        publish_ns,
-                        sequence=self._sequence,
+                        self._channel_id(topic), time_ns, data, publish_ns, sequence=self._sequence
                     )
                 now = time.monotonic()
                 if self._pending_since is None:
                     self._pending_since = now
-                if frame_index is not None:
-                    self._pending_max_frame = max(self._pending_max_frame or 0, frame_index)
                 if flush_now or now - self._pending_since >= self.flush_interval:
                     self._flush_locked()
-            except OSError as error:
-                self._flush_error = error
-                raise SessionError(f"writing session {self.path} failed: {error}") from error
+
+            self._guarded(add_and_maybe_flush)
 
     def _flush_locked(self) -> None:
-        self._writer.flush()
-        if self._fsync:
-            os.fsync(self._file.fileno())
-        if self._pending_max_frame is not None:
-            self._saved_frame_index = max(self._saved_frame_index or 0, self._pending_max_frame)
+        self._writer.flush()  # closes the chunk and flushes the SessionFile (fsync there)
         self._pending_since = None
-        self._pending_max_frame = None
 
     def _flush_loop(self) -> None:
         timeout = self.flush_interval
         while not self._stop.wait(timeout):
             with self._lock:
-                if self._closed or self._flush_error is not None:
+                if self._closed or self._file.error is not None:
                     return
                 timeout = self.flush_interval
                 if self._pending_since is None:
@@ -462,9 +476,13 @@ class SessionRecorder:
                     continue
                 try:
                     self._flush_locked()
-                except OSError as error:
-                    self._flush_error = error
-                    return
+                except OSError:
+                    return  # the next call raises SessionWriteError (`write_error`)
+
+
+class SessionWriteError(SessionError):
+    """Writing the session file failed (e.g. the disk is full): the recording stopped, and the
+    file keeps everything written before (`SessionRecorder.write_error`)."""
 
 
 class _SessionFileExistsError(SessionError):
@@ -481,7 +499,7 @@ def _read_scene(scene_path: str | Path) -> bytes:
 def _create_file(path: Path) -> BinaryIO:
     """A new file opened for writing; an existing file is never overwritten."""
     try:
-        return open(path, "xb")  # noqa: SIM115 - closed by the recorder's close()
+        return open(path, "xb", buffering=0)  # noqa: SIM115 - closed by the recorder's close()
     except FileExistsError as error:
         raise _SessionFileExistsError(
             f"{path} already exists; session files are never overwritten"

@@ -13,6 +13,7 @@ import numpy as np
 from autotrack.errors import SessionError
 from autotrack.params import TrackerParams
 from autotrack.result import PoseEstimate, TrackResult
+from autotrack.sessions.metadata import recorded_path
 
 Box = tuple[float, float, float, float]
 
@@ -107,6 +108,9 @@ class Session:
     """Target id -> (N, 4) search regions (x, y, w, h) of the recorded results; NaN where none."""
     scene_attachment: bytes | None = field(default=None, repr=False)
     """Contents of the scene file recorded with the session, if any."""
+    being_recorded: bool = False
+    """A recorder holds the file's write lock: it is still being written (not cut short; the
+    end comes when the recording closes). `autotrack.sessions.output.recording_in_progress`."""
     partial_frame: int | None = None
     """In a file cut short: its last frame when only part of that frame's records reached the
     file (a target or the pose recorded on the frame before is missing there); its records are
@@ -114,13 +118,21 @@ class Session:
 
     @property
     def source(self) -> str:
-        """What was tracked, as recorded (the sequence path)."""
-        return str(self.metadata.get("source", ""))
+        """What was tracked, as recorded (the sequence path, exactly as given)."""
+        return recorded_path(self.metadata, "source")
+
+    @property
+    def recorded_live(self) -> bool:
+        """The frames came from a live source, which cannot be replayed: the session is looked
+        through on its embedded frames. (Sessions written before the `live_source` marker:
+        those that embed frames, which only live runs did then.)"""
+        marker = self.metadata.get("live_source")
+        return marker == "true" if marker is not None else self.image_count > 0
 
     @property
     def scene_path(self) -> str | None:
         """The scene file the session was recorded with, as recorded (None: no scene)."""
-        return str(self.metadata.get("scene_path") or "") or None
+        return recorded_path(self.metadata, "scene_path") or None
 
     @property
     def frame_count(self) -> int:

@@ -15,7 +15,7 @@ from mcap.records import Attachment, Channel, Header, Message, Metadata, Schema
 from mcap.writer import CompressionType, Writer
 
 from autotrack.errors import SessionError
-from autotrack.sessions.reader import _iter_records, _scan_records
+from autotrack.sessions.records import iter_records, scan_records
 
 
 def finished_copy(path: str | Path) -> bytes:
@@ -28,7 +28,7 @@ def finished_copy(path: str | Path) -> bytes:
         raise SessionError(f"cannot open session file {path}: {error}") from error
     with handle:
         size = os.fstat(handle.fileno()).st_size
-        limit, complete = _scan_records(handle, size, str(path))
+        limit, complete = scan_records(handle, size, str(path))
         if complete:
             handle.seek(0)
             return handle.read(size)
@@ -38,7 +38,7 @@ def finished_copy(path: str | Path) -> bytes:
         )
         schemas: dict[int, int] = {}
         channels: dict[int, int] = {}
-        for record in _iter_records(handle, limit):
+        for record in iter_records(handle, limit):
             if isinstance(record, Header):
                 writer.start(profile=record.profile, library=record.library)
             elif isinstance(record, Schema):

@@ -249,7 +249,7 @@ def _line_kernel(blur_px: tuple[float, float]) -> np.ndarray:
     return kernel / kernel.sum()
 
 
-def _blur_vector(
+def blur_vector(
     camera: CameraIntrinsics,
     trajectory: Callable[[float], tuple[np.ndarray, np.ndarray]],
     t: float,
@@ -296,7 +296,7 @@ def render_sequence(
     trajectory = spec.camera_path()
     rng = np.random.default_rng(spec.seed + 15485863)
     for index in range(spec.frames):
-        blur = _blur_vector(
+        blur = blur_vector(
             camera, trajectory, float(timestamps[index]), float(conditions.exposure_s[index])
         )
         frame = renderer.render(

@@ -30,12 +30,12 @@ import numpy as np
 from autotrack.errors import InputError
 from autotrack.io.atomic import write_image, write_text
 from autotrack.localization.camera import project_points
-from autotrack.synthetic.renderer import Renderer, _blur_vector, write_sequence_truth
+from autotrack.synthetic.renderer import Renderer, blur_vector, write_sequence_truth
 from autotrack.synthetic.trajectories import (
     RenderSettings,
     SequenceSpec,
-    _yaw_pitch,
     frame_conditions,
+    yaw_pitch,
 )
 from autotrack.synthetic.world import (
     LANDMARK_LAYOUT,
@@ -82,7 +82,7 @@ class Turn:
     yaw_deg: float
     """Largest extra yaw (degrees; positive turns left, so landmarks leave on the right)."""
     pitch_deg: float = 0.0
-    """Largest extra pitch at the same time (degrees; positive looks up... see `_yaw_pitch`)."""
+    """Largest extra pitch at the same time (degrees; positive looks up... see `yaw_pitch`)."""
     ramp_s: float = 1.0
     """Time to turn away and, later, back (seconds)."""
     hold_s: float = 1.2
@@ -146,7 +146,7 @@ class ScenarioSpec:
             for turn in turns:
                 yaw, pitch = turn.angles_rad(t)
                 if yaw or pitch:
-                    rotation = _yaw_pitch(rotation, yaw, pitch)
+                    rotation = yaw_pitch(rotation, yaw, pitch)
             return rotation, position
 
         return pose
@@ -333,7 +333,7 @@ def render_scenario(
             c = occluder_corners(occluder, t, position)
             flying.append([replace(board, origin=c[0], u_axis=c[1] - c[0], v_axis=c[3] - c[0])])
         renderer.objects = scenery + flying
-        blur = _blur_vector(camera, path, t, float(conditions.exposure_s[index]))
+        blur = blur_vector(camera, path, t, float(conditions.exposure_s[index]))
         frame = renderer.render(
             rotations[index],
             position,

@@ -96,7 +96,7 @@ def look_at(position: np.ndarray, target: np.ndarray, roll_rad: float = 0.0) -> 
     return rotation
 
 
-def _yaw_pitch(rotation: np.ndarray, yaw_rad: float, pitch_rad: float) -> np.ndarray:
+def yaw_pitch(rotation: np.ndarray, yaw_rad: float, pitch_rad: float) -> np.ndarray:
     """Turn a camera about the world vertical (yaw) and its own x axis (pitch)."""
     c, s = math.cos(yaw_rad), math.sin(yaw_rad)
     yaw = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
@@ -174,7 +174,7 @@ def camera_trajectory(
         position = position + shake(t)
         wobble = tilt(t)
         rotation = look_at(position, target, roll_rad=roll + wobble[2])
-        rotation = _yaw_pitch(rotation, yaw + wobble[0], pitch + wobble[1])
+        rotation = yaw_pitch(rotation, yaw + wobble[0], pitch + wobble[1])
         return rotation, position
 
     return pose
