@@ -18,19 +18,17 @@ flags, kept a year), by which tabs of one browser share sessions and uploads and
 other browsers' (`app/owners.py`).
 
 viser builds its websockets server inside `ViserServer.__init__` and offers no hook, so
-`guarded_handshakes` wraps `websockets.asyncio.server.serve` while the server starts and puts
-the check in front of viser's own `process_request`. If viser stops calling `serve` that way
-the check is not installed and the server refuses to start (`AccessGuard.installed`).
+`app/viser_private.py`'s `guard_handshakes` puts `AccessGuard.wrap` in front of viser's own
+`process_request` while the server starts. If viser stops starting its server that way the
+check is not installed and the server refuses to start (`AccessGuard.installed`).
 """
 
 from __future__ import annotations
 
-import contextlib
 import hmac
 import http
 import secrets
-import threading
-from collections.abc import Callable, Iterator
+from collections.abc import Callable
 from http.cookies import CookieError, SimpleCookie
 from urllib.parse import parse_qs, urlsplit
 
@@ -43,7 +41,6 @@ WILDCARD_HOSTS = frozenset({"0.0.0.0", "::", ""})
 """Bind addresses meaning every interface."""
 
 ProcessRequest = Callable[[object, Request], Response | None]
-_PATCH_LOCK = threading.Lock()
 
 
 def new_token() -> str:
@@ -152,22 +149,3 @@ class AccessGuard:
             return response
 
         return process_request
-
-
-@contextlib.contextmanager
-def guarded_handshakes(guard: AccessGuard) -> Iterator[None]:
-    """While the block runs, every websockets server started gets `guard` in front of its
-    `process_request` (the block should start exactly one: viser's)."""
-    import websockets.asyncio.server as ws_server
-
-    with _PATCH_LOCK:
-        original = ws_server.serve
-
-        def serve(*args, process_request=None, **kwargs):  # noqa: ANN002, ANN003, ANN202
-            return original(*args, process_request=guard.wrap(process_request), **kwargs)
-
-        ws_server.serve = serve
-        try:
-            yield
-        finally:
-            ws_server.serve = original

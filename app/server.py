@@ -12,7 +12,7 @@ import threading
 
 import viser
 
-from app.access import AccessGuard, guarded_handshakes
+from app.access import AccessGuard
 from app.channel import ClientChannel, ViserClientChannel
 from app.config import AppConfig
 from app.memory import release_freed_memory
@@ -20,6 +20,7 @@ from app.owners import BrowserSpace, browser_tag
 from app.recordings import RecordingRegistry
 from app.tab import Tab
 from app.uploads import UploadReceiver
+from app.viser_private import check_viser_version, guard_handshakes, handshake_headers
 from autotrack.tracker.target_process import WorkerPool
 from autotrack.tracker.warmup import warm_up
 
@@ -28,6 +29,7 @@ class StudioServer:
     """A running app: the viser server plus one `Tab` per connected browser tab."""
 
     def __init__(self, config: AppConfig) -> None:
+        check_viser_version()
         self.config = config
         config.sessions_dir.mkdir(parents=True, exist_ok=True)
         self.roots = config.browsable_roots()
@@ -39,7 +41,7 @@ class StudioServer:
         self.tabs: dict[int, Tab] = {}
         """Open tabs by id (guarded by a lock: tabs connect and leave on viser's threads)."""
         self.access = AccessGuard(config.token, config.host)
-        with guarded_handshakes(self.access):
+        with guard_handshakes(self.access.wrap):
             self.viser = viser.ViserServer(
                 host=config.host, port=config.port, label="AutoTrack Studio", verbose=False
             )
@@ -83,13 +85,10 @@ class StudioServer:
     def _browser_of(self, client_id: int) -> str | None:
         """The browser cookie of a client's websocket handshake (None if it sent none).
 
-        viser does not pass the handshake on, so it is read from viser's table of live
-        connections; if viser changes that, every tab gets a space of its own (nothing is
-        shared by mistake)."""
-        infra = getattr(self.viser, "_websock_server", None)
-        connection = getattr(infra, "_live_connections", {}).get(client_id)
-        request = getattr(connection, "request", None)
-        return None if request is None else self.access.browser_id(request.headers)
+        viser does not pass the handshake on (app/viser_private.py reads it); a client without
+        one gets a space of its own (nothing is shared by mistake)."""
+        headers = handshake_headers(self.viser, client_id)
+        return None if headers is None else self.access.browser_id(headers)
 
     def open_tab(
         self,

@@ -18,14 +18,21 @@ import os
 import shutil
 import threading
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import BinaryIO
 
 import viser
-from viser._messages import FileTransferPart, FileTransferPartAck, FileTransferStartUpload
 
 from app.paths import VIDEO_SUFFIXES, UploadLimits, folder_bytes, safe_file_name
+from app.viser_private import (
+    UploadHandlers,
+    UploadPart,
+    UploadStart,
+    acknowledge_upload,
+    take_over_uploads,
+    upload_button_id,
+)
 
 FREE_SPACE_RESERVE = 256 * 1024**2
 """Disk space an upload must leave free (bytes), so a full disk never stops the recordings."""
@@ -44,6 +51,14 @@ class _Transfer:
     sink: BinaryIO
     received: int = 0
     next_part: int = 0
+
+
+@dataclass
+class _Interface:
+    """Our upload handlers on one GUI's websocket, and the tabs whose buttons use it."""
+
+    handlers: UploadHandlers
+    tab_ids: set[int] = field(default_factory=set)
 
 
 @dataclass(frozen=True)
@@ -65,7 +80,8 @@ class UploadReceiver:
         self._lock = threading.Lock()
         self._buttons: dict[str, _Button] = {}
         self._transfers: dict[str, _Transfer] = {}
-        self._interfaces: dict[int, object] = {}
+        self._interfaces: dict[int, _Interface] = {}
+        """The GUIs whose uploads we receive, by id (a client's, or the server's in tests)."""
         shutil.rmtree(incoming, ignore_errors=True)  # what a killed server left behind
         incoming.mkdir(parents=True, exist_ok=True)
 
@@ -79,22 +95,13 @@ class UploadReceiver:
     ) -> None:
         """Receive `button`'s uploads: `deliver(name, path)` gets each complete file (it owns
         the file from then on), `refuse(message)` each refusal."""
-        interface = gui._websock_interface  # noqa: SLF001 (viser offers no public hook)
-        handlers = interface._incoming_handlers  # noqa: SLF001
         with self._lock:
-            self._buttons[button._impl.uuid] = _Button(tab_id, deliver, refuse)  # noqa: SLF001
-            if id(interface) in self._interfaces:
-                return
-            self._interfaces[id(interface)] = interface
-            for message_type, ours in (
-                (FileTransferStartUpload, self._start),
-                (FileTransferPart, self._part),
-            ):
-                viser_handler = getattr(gui, f"_handle_{_HANDLERS[message_type]}")
-                if viser_handler not in handlers.get(message_type, []):
-                    raise RuntimeError("viser's upload handlers are not where this app expects")
-                interface.unregister_handler(message_type, viser_handler)
-                interface.register_handler(message_type, _with_interface(ours, interface))
+            self._buttons[upload_button_id(button)] = _Button(tab_id, deliver, refuse)
+            interface = self._interfaces.get(id(gui))
+            if interface is None:
+                handlers = take_over_uploads(gui, self._start, self._part)
+                interface = self._interfaces[id(gui)] = _Interface(handlers)
+            interface.tab_ids.add(tab_id)
 
     def forget_tab(self, tab_id: int) -> None:
         """A tab closed: end its transfers (deleting their files) and forget its buttons."""
@@ -104,6 +111,13 @@ class UploadReceiver:
             ended = [key for key, transfer in self._transfers.items() if transfer.tab_id == tab_id]
             for key in ended:
                 _discard(self._transfers.pop(key))
+            released = []
+            for key, interface in list(self._interfaces.items()):
+                interface.tab_ids.discard(tab_id)
+                if not interface.tab_ids:
+                    released.append(self._interfaces.pop(key).handlers)
+        for handlers in released:
+            handlers.release()
 
     def in_flight(self) -> int:
         """Transfers in progress."""
@@ -135,7 +149,7 @@ class UploadReceiver:
             return "the server's disk has no room for this upload"
         return None
 
-    def _start(self, interface, client_id: int, message: FileTransferStartUpload) -> None:  # noqa: ANN001
+    def _start(self, handlers: UploadHandlers, client_id: int, message: UploadStart) -> None:
         with self._lock:
             button = self._buttons.get(message.source_component_uuid)
             if button is None or button.tab_id != client_id:
@@ -158,10 +172,10 @@ class UploadReceiver:
                         sink,
                     )
         if problem is not None:
-            _ack(interface, message.source_component_uuid, message.transfer_uuid, 1, 1)
+            acknowledge_upload(handlers, message.source_component_uuid, message.transfer_uuid, 1, 1)
             button.refuse(problem)
 
-    def _part(self, interface, client_id: int, message: FileTransferPart) -> None:  # noqa: ANN001
+    def _part(self, handlers: UploadHandlers, client_id: int, message: UploadPart) -> None:
         with self._lock:
             transfer = self._transfers.get(message.transfer_uuid)
             if transfer is None or transfer.tab_id != client_id:
@@ -194,8 +208,8 @@ class UploadReceiver:
                     _discard(transfer)
                 else:
                     transfer.sink.close()
-        _ack(
-            interface, transfer.button, message.transfer_uuid, transfer.received, transfer.declared
+        acknowledge_upload(
+            handlers, transfer.button, message.transfer_uuid, transfer.received, transfer.declared
         )
         if button is None:
             if problem is None and done:
@@ -204,26 +218,6 @@ class UploadReceiver:
             button.refuse(problem)
         elif done:
             button.deliver(transfer.name, transfer.path)
-
-
-_HANDLERS = {FileTransferStartUpload: "file_transfer_start", FileTransferPart: "file_transfer_part"}
-
-
-def _with_interface(handler, interface):  # noqa: ANN001, ANN202
-    """`handler` with the websocket interface its acknowledgements go to."""
-    return lambda client_id, message: handler(interface, client_id, message)
-
-
-def _ack(interface, button: str, transfer: str, received: int, total: int) -> None:  # noqa: ANN001
-    """Tell the browser's upload button how far the transfer is (it shows progress)."""
-    interface.queue_message(
-        FileTransferPartAck(
-            source_component_uuid=button,
-            transfer_uuid=transfer,
-            transferred_bytes=received,
-            total_bytes=total,
-        )
-    )
 
 
 def _discard(transfer: _Transfer) -> None:
