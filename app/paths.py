@@ -22,6 +22,7 @@ from dataclasses import dataclass
 from io import BytesIO
 from pathlib import Path, PurePosixPath
 
+from app.browser_text import readable
 from app.owners import SPACE_PREFIX
 from autotrack.errors import InputError
 from autotrack.io.frames import IMAGE_EXTENSIONS, VIDEO_EXTENSIONS
@@ -90,11 +91,9 @@ def resolve_user_path(text: str, roots: Sequence[Path]) -> Path:
         raise InputError("type a path to a sequence folder, an image folder or a video")
     if "\x00" in cleaned:
         raise InputError("the path contains a NUL character")
-    typed = Path(cleaned)
-    candidates = [typed] if typed.is_absolute() else [root / typed for root in roots]
-    if not typed.is_absolute() and typed.parts:  # as the app shows it: `<root name>/...`
-        rest = Path(*typed.parts[1:]) if len(typed.parts) > 1 else Path()
-        candidates += [root / rest for root in roots if _root_label(root) == typed.parts[0]]
+    candidates = []
+    for spelling in dict.fromkeys((cleaned, _unescaped(cleaned))):  # as typed, then unescaped
+        candidates += _candidates(Path(spelling), roots)
     for candidate in candidates:
         try:
             resolved = candidate.resolve(strict=True)
@@ -103,9 +102,30 @@ def resolve_user_path(text: str, roots: Sequence[Path]) -> Path:
         if is_under(resolved, roots):
             return resolved
     raise InputError(
-        f"{cleaned}: no such file or folder among those this server may open; to open other "
-        "folders, restart the app with --allow-root DIR"
+        f"{readable(_clipped(cleaned))}: no such file or folder among those this server may "
+        "open; to open other folders, restart the app with --allow-root DIR"
     )
+
+
+def _candidates(typed: Path, roots: Sequence[Path]) -> list[Path]:
+    """Where a typed path may be: itself if absolute, else under each root, or under the root
+    its first component names (as the app shows paths: `<root name>/...`)."""
+    if typed.is_absolute():
+        return [typed]
+    candidates = [root / typed for root in roots]
+    if typed.parts:
+        rest = Path(*typed.parts[1:]) if len(typed.parts) > 1 else Path()
+        candidates += [root / rest for root in roots if _root_label(root) == typed.parts[0]]
+    return candidates
+
+
+MAX_ECHOED = 120
+"""The most characters of a typed text a message repeats."""
+
+
+def _clipped(text: str) -> str:
+    """`text`, cut to MAX_ECHOED characters (a 1 MB paste is not echoed back whole)."""
+    return text if len(text) <= MAX_ECHOED else f"{text[: MAX_ECHOED - 1]}…"
 
 
 def looks_like_sequence(path: Path) -> bool:
@@ -191,16 +211,25 @@ def live_source(text: str, roots: Sequence[Path]) -> Path | str:
     return path
 
 
+def _unescaped(text: str) -> str:
+    """The name `readable` (app/browser_text.py) wrote as `text` (its `\\xNN` escapes back as the bytes they name)."""
+    return _ESCAPED_BYTE.sub(lambda match: chr(0xDC00 + int(match.group(1), 16)), text)
+
+
+_ESCAPED_BYTE = re.compile(r"\\x([89a-fA-F][0-9a-fA-F])")
+"""A byte of a non-UTF-8 name as `readable` writes it (only bytes >= 0x80 are escaped)."""
+
+
 def display_name(path: Path, roots: Sequence[Path]) -> str:
     """`path` relative to the root that holds it (prefixed by the root's name; a browser's
-    own upload folder is named after the uploads folder that holds it)."""
+    own upload folder is named after the uploads folder that holds it), made `readable`."""
     for root in roots:
         label = _root_label(root)
         if path == root:
-            return label
+            return readable(label)
         if path.is_relative_to(root):
-            return f"{label}/{path.relative_to(root).as_posix()}"
-    return path.name
+            return readable(f"{label}/{path.relative_to(root).as_posix()}")
+    return readable(path.name)
 
 
 def _root_label(root: Path) -> str:
@@ -232,7 +261,7 @@ def shown_paths(text: str, roots: Sequence[Path], private: Sequence[Path] = ()) 
     for url in _URL.finditer(text):
         shown += [hidden(text[start : url.start()]), url.group(0)]
         start = url.end()
-    return "".join([*shown, hidden(text[start:])])
+    return readable("".join([*shown, hidden(text[start:])]))
 
 
 _SAFE_NAME = re.compile(r"[^A-Za-z0-9._-]+")

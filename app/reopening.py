@@ -10,6 +10,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
+from app.browser_text import readable
 from autotrack.errors import InputError
 from autotrack.localization.scene import load_scene
 from autotrack.sessions import open_session
@@ -21,7 +22,7 @@ class SessionCommands:
 
     def refresh_sessions(self) -> None:
         """List the recorded sessions this tab's browser may see (app/owners.py), newest first."""
-        self.session_choices = {path.name: path for path in self.space.session_files()}
+        self.session_choices = {readable(path.name): path for path in self.space.session_files()}
 
     def reopen(self, name: str) -> None:
         """Reopen the session listed as `name` and continue it into a new session file, with

@@ -5,6 +5,8 @@ read-only and full disks, stalled uploads. Tabs are driven over real websockets
 from __future__ import annotations
 
 import gc
+import os
+import shutil
 import time
 import weakref
 from pathlib import Path
@@ -15,6 +17,9 @@ from app.config import AppConfig
 from tests.browser_socket import SocketBrowser
 from tests.test_app import DEMO, _draw_demo_boxes
 
+ROOT = "root"
+"""The --allow-root folder made under each test's tmp_path."""
+
 
 @pytest.fixture
 def studio(tmp_path: Path):
@@ -22,10 +27,12 @@ def studio(tmp_path: Path):
         pytest.skip("static/demo is missing")
     from app.server import StudioServer
 
+    (tmp_path / ROOT).mkdir()
     server = StudioServer(
         AppConfig(
             port=0,
             sessions_dir=tmp_path / "sessions",
+            allowed_roots=(tmp_path / ROOT,),
             demo_dir=DEMO,
             tracker_threads=1,
             token="secret-token",
@@ -76,3 +83,69 @@ def test_closed_tabs_are_freed_with_their_controller_and_results(studio) -> None
         browser.close()
         _wait(lambda: not studio.tabs)
     _wait(lambda: _live(references) == 0)
+
+
+def _frames_folder(folder: Path, count: int, odd_frame: int | None = None) -> Path:
+    """A folder of the demo's first `count` frames; frame `odd_frame` (0-based) gets a name
+    whose bytes are not UTF-8."""
+    (folder / "img").mkdir(parents=True)
+    for index, frame in enumerate(sorted((DEMO / "img").iterdir())[:count]):
+        name = frame.name if index != odd_frame else os.fsdecode(b"0000\xe9" + frame.name.encode())
+        shutil.copy(frame, folder / "img" / name)
+    return folder
+
+
+def _status_sent(browser: SocketBrowser, text: str) -> bool:
+    """Whether a markdown update holding `text` reached the browser."""
+    return any(
+        text in str(message["updates"].get("_markdown", ""))
+        for message in browser.messages("GuiUpdateMessage")
+    )
+
+
+def test_a_folder_and_a_frame_named_in_latin_1_leave_every_tab_working(studio) -> None:
+    """Issue 42 item 2: a folder whose name is not UTF-8 under --allow-root closed every new
+    tab's websocket (1011); a frame file so named dropped the tab when played."""
+    root = studio.config.allowed_roots[0]
+    _frames_folder(Path(os.fsdecode(os.fsencode(root) + b"/caf\xe9")), 4)
+    _frames_folder(root / "plain", 6, odd_frame=3)
+    browser, tab = open_socket_tab(studio)
+    shown = f"{ROOT}/caf\\xe9"
+    assert shown in tab.panels.sequence.dropdown.options
+    tab.worker.submit(tab.controller.open_listed, shown)
+    assert tab.wait_idle()
+    assert tab.controller.run.frame_count == 4
+    assert tab.panels.sequence.path.value == shown
+    tab.worker.submit(tab.controller.open_typed, shown)  # the escaped spelling, typed back
+    assert tab.wait_idle() and tab.controller.run.frame_count == 4
+    browser.wait_for(lambda: _status_sent(browser, "caf\\\\xe9"))  # as markdown escapes it
+    tab.worker.submit(tab.controller.open_typed, f"{ROOT}/plain")
+    assert tab.wait_idle() and tab.controller.run.frame_count == 6
+    tab.worker.submit(tab.seek, 5)  # past the oddly named frame
+    assert tab.wait_idle() and tab.controller.cursor == 5
+    browser.wait_for(lambda: _status_sent(browser, "frame 6 / 6"))
+    assert browser.connection.close_code is None  # still connected
+    browser.close()
+    second, _ = open_socket_tab(studio)  # a new tab connects and stays
+    second.wait_for(lambda: _status_sent(second, "Opened"))
+    assert second.connection.close_code is None
+    second.close()
+
+
+def test_typed_html_shows_as_text_and_a_huge_path_is_not_echoed_whole(studio) -> None:
+    """Issue 42 item 10: a typed path was echoed into the status line as raw HTML (an external
+    image fetched, a style applied), and a 1 MB path was echoed back whole."""
+    browser, tab = open_socket_tab(studio)
+    typed = "<img src=http://127.0.0.1:9/x.png><style>*{color:red}</style>![x](http://127.0.0.1:9/y)"
+    tab.worker.submit(tab.controller.open_typed, typed)
+    assert tab.wait_idle()
+    _wait(lambda: "no such file" in tab.panels.status.content)
+    status = tab.panels.status.content
+    assert "&lt;img src=http://127.0.0.1:9/x.png&gt;&lt;style&gt;" in status
+    assert "<" not in status and "![" not in status and "\\!\\[x\\]" in status
+    tab.worker.submit(tab.controller.open_typed, "a" * 1_000_000)
+    assert tab.wait_idle()
+    _wait(lambda: "aaaa" in tab.panels.status.content)
+    assert len(tab.panels.status.content) < 1000
+    assert browser.connection.close_code is None
+    browser.close()
