@@ -14,6 +14,7 @@ import re
 import secrets
 import shutil
 import stat
+import tempfile
 import time
 import zipfile
 import zlib
@@ -126,6 +127,18 @@ MAX_ECHOED = 120
 def _clipped(text: str) -> str:
     """`text`, cut to MAX_ECHOED characters (a 1 MB paste is not echoed back whole)."""
     return text if len(text) <= MAX_ECHOED else f"{text[: MAX_ECHOED - 1]}…"
+
+
+def check_writable(folder: Path, what: str) -> None:
+    """Refuse (InputError, one line) when no file can be created in `folder` (read-only, no
+    permission), before anything that would need one is torn down."""
+    try:
+        folder.mkdir(parents=True, exist_ok=True)
+        with tempfile.TemporaryFile(dir=folder):
+            pass
+    except OSError as error:
+        reason = error.strerror or type(error).__name__
+        raise InputError(f"cannot write to the {what} folder {folder} ({reason})") from None
 
 
 def looks_like_sequence(path: Path) -> bool:

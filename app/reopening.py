@@ -11,6 +11,7 @@ from __future__ import annotations
 from pathlib import Path
 
 from app.browser_text import readable
+from app.paths import check_writable
 from autotrack.errors import InputError
 from autotrack.localization.scene import load_scene
 from autotrack.sessions import open_session
@@ -33,6 +34,7 @@ class SessionCommands:
         writer = self.recordings.writer_of(path)
         if writer not in (None, self.tab_id):
             raise InputError(f"{path.name} is being recorded by another tab; reopen it later")
+        check_writable(self.space.sessions_dir, "sessions")  # the continuation's new file
         if writer == self.tab_id:  # this tab's own recording: finished first, then reopened
             self.close_run()
         session = open_session(path)

@@ -4,9 +4,11 @@ read-only and full disks, stalled uploads. Tabs are driven over real websockets
 
 from __future__ import annotations
 
+import contextlib
 import gc
 import os
 import shutil
+import subprocess
 import time
 import weakref
 from pathlib import Path
@@ -15,7 +17,7 @@ import pytest
 
 from app.config import AppConfig
 from tests.browser_socket import SocketBrowser
-from tests.test_app import DEMO, _draw_demo_boxes
+from tests.test_app import DEMO, _draw_demo_boxes, _open_tab
 
 ROOT = "root"
 """The --allow-root folder made under each test's tmp_path."""
@@ -136,7 +138,9 @@ def test_typed_html_shows_as_text_and_a_huge_path_is_not_echoed_whole(studio) ->
     """Issue 42 item 10: a typed path was echoed into the status line as raw HTML (an external
     image fetched, a style applied), and a 1 MB path was echoed back whole."""
     browser, tab = open_socket_tab(studio)
-    typed = "<img src=http://127.0.0.1:9/x.png><style>*{color:red}</style>![x](http://127.0.0.1:9/y)"
+    typed = (
+        "<img src=http://127.0.0.1:9/x.png><style>*{color:red}</style>![x](http://127.0.0.1:9/y)"
+    )
     tab.worker.submit(tab.controller.open_typed, typed)
     assert tab.wait_idle()
     _wait(lambda: "no such file" in tab.panels.status.content)
@@ -149,3 +153,45 @@ def test_typed_html_shows_as_text_and_a_huge_path_is_not_echoed_whole(studio) ->
     assert len(tab.panels.status.content) < 1000
     assert browser.connection.close_code is None
     browser.close()
+
+
+@contextlib.contextmanager
+def read_only(folder: Path):
+    """`folder` made read-only for this process (root ignores permissions: immutable then)."""
+    if os.geteuid() == 0:
+        if shutil.which("chattr") is None:
+            pytest.skip("running as root without chattr: cannot make a folder read-only")
+        subprocess.run(["chattr", "+i", str(folder)], check=True)
+        try:
+            yield
+        finally:
+            subprocess.run(["chattr", "-i", str(folder)], check=True)
+    else:
+        folder.chmod(0o555)
+        try:
+            yield
+        finally:
+            folder.chmod(0o755)
+
+
+def test_a_read_only_sessions_folder_is_refused_before_the_run_is_closed(studio) -> None:
+    """Issue 42 item 4: reopening with a read-only sessions folder ended in a traceback with
+    the tab half-closed; now one line, and the open run with its targets stays."""
+    tab, channel = _open_tab(studio)
+    for command, *args in ((tab.controller.load_boxes_json,), (tab.seek, 3)):
+        tab.worker.submit(command, *args)
+        assert tab.wait_idle()  # one at a time: a waiting command interrupts tracking ahead
+    tab.worker.submit(tab.controller.refresh_sessions)
+    assert tab.wait_idle()
+    run = tab.controller.run
+    assert len(run.targets) == 4 and run.tracked_until == 3
+    (listed,) = tab.controller.session_choices
+    with read_only(tab.controller.space.sessions_dir):
+        tab.worker.submit(tab.controller.reopen, listed)
+        assert tab.wait_idle()
+    message, error = channel.notes[-1]
+    assert error and message.startswith("cannot write to the sessions folder sessions/browser-")
+    assert "\n" not in message and "Error" not in message
+    assert tab.controller.run is run and len(run.targets) == 4 and run.tracked_until == 3
+    tab.worker.submit(tab.seek, 5)  # still tracking, still recording
+    assert tab.wait_idle() and run.tracked_until == 5 and run.session_path.is_file()
