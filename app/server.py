@@ -8,6 +8,7 @@ playback, GUI and 3-D scene) belongs to one tab (app/controller.py holds it).
 
 from __future__ import annotations
 
+import logging
 import threading
 
 import viser
@@ -15,14 +16,17 @@ import viser
 from app.access import AccessGuard
 from app.channel import ClientChannel, ViserClientChannel
 from app.config import AppConfig
-from app.memory import release_freed_memory
+from app.memory import limit_malloc_arenas, release_freed_memory
 from app.owners import BrowserSpace, browser_tag
 from app.recordings import RecordingRegistry
 from app.tab import Tab
 from app.uploads import UploadReceiver
 from app.viser_private import check_viser_version, guard_handshakes, handshake_headers
+from autotrack.errors import AutoTrackError
 from autotrack.tracker.target_process import WorkerPool
 from autotrack.tracker.warmup import warm_up
+
+LOG = logging.getLogger(__name__)
 
 
 class StudioServer:
@@ -30,6 +34,7 @@ class StudioServer:
 
     def __init__(self, config: AppConfig) -> None:
         check_viser_version()
+        limit_malloc_arenas()  # before viser's and the tabs' threads start
         self.config = config
         config.sessions_dir.mkdir(parents=True, exist_ok=True)
         self.roots = config.browsable_roots()
@@ -136,7 +141,7 @@ class StudioServer:
             tab = self.tabs.pop(tab_id, None)
         self.uploads.forget_tab(tab_id)
         if tab is not None:
-            tab.close()
+            _close(tab)
             del tab
             release_freed_memory()
 
@@ -146,6 +151,15 @@ class StudioServer:
             tabs = list(self.tabs.values())
             self.tabs.clear()
         for tab in tabs:
-            tab.close()
+            _close(tab)
         self.worker_pool.close()
         self.viser.stop()
+
+
+def _close(tab: Tab) -> None:
+    """Close a tab; a failure to finish its files (a full disk) is logged in one line, the tab
+    is let go all the same (its recording released, app/controller.py close_run)."""
+    try:
+        tab.close()
+    except (OSError, AutoTrackError) as error:
+        LOG.warning("tab %s closed with an error: %s", tab.tab_id, error)

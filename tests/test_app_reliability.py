@@ -5,17 +5,23 @@ read-only and full disks, stalled uploads. Tabs are driven over real websockets
 from __future__ import annotations
 
 import contextlib
+import errno
 import gc
+import io
 import os
 import shutil
 import subprocess
+import tempfile
 import time
 import weakref
+import zipfile
 from pathlib import Path
 
 import pytest
 
+from app.browser_text import readable
 from app.config import AppConfig
+from autotrack.errors import SessionError
 from tests.browser_socket import SocketBrowser
 from tests.test_app import DEMO, _draw_demo_boxes, _open_tab
 
@@ -195,3 +201,57 @@ def test_a_read_only_sessions_folder_is_refused_before_the_run_is_closed(studio)
     assert tab.controller.run is run and len(run.targets) == 4 and run.tracked_until == 3
     tab.worker.submit(tab.seek, 5)  # still tracking, still recording
     assert tab.wait_idle() and run.tracked_until == 5 and run.session_path.is_file()
+
+
+def test_a_tab_closed_on_a_full_disk_releases_its_recording(studio, monkeypatch) -> None:
+    """Issue 42 item 3: closing a tab on a full disk raised in close_tab before the registry
+    let the file go, which stayed 'being recorded by another tab' until restart."""
+    tab, _ = _open_tab(studio)
+    tab.worker.submit(tab.controller.load_boxes_json)
+    assert tab.wait_idle()
+    run = tab.controller.run
+    path = run.session_path
+    assert studio.recordings.writer_of(path) == tab.tab_id
+
+    def disk_full() -> None:
+        raise OSError(errno.ENOSPC, "No space left on device")
+
+    monkeypatch.setattr(run, "close", disk_full)
+    studio.close_tab(tab.tab_id)
+    assert studio.recordings.writer_of(path) is None
+    other, channel = _open_tab(studio, tab_id=2)
+    other.worker.submit(other.controller.refresh_sessions)
+    assert other.wait_idle()
+    other.worker.submit(other.controller.reopen, readable(path.name))
+    assert other.wait_idle()
+    assert not any("another tab" in note for note, _ in channel.notes)
+    assert other.controller.message.startswith(f"Reopened {path.name}")
+
+
+def test_downloads_work_while_the_disk_is_full(studio, monkeypatch, tmp_path: Path) -> None:
+    """Issue 42 item 3: while the disk was full, "Download tracks" failed with the session's
+    error (the flush) and its scratch files; it now sends what the session file holds."""
+    tab, channel = _open_tab(studio)
+    tab.worker.submit(tab.controller.load_boxes_json)
+    assert tab.wait_idle()
+    tab.worker.submit(tab.seek, 3)
+    assert tab.wait_idle()
+    run = tab.controller.run
+    run.flush()
+
+    def disk_full() -> None:
+        raise SessionError("cannot write the session file: [Errno 28] No space left on device")
+
+    monkeypatch.setattr(run, "flush", disk_full)
+    full = tmp_path / "full-temp"
+    full.mkdir()
+    monkeypatch.setattr(tempfile, "tempdir", str(full))
+    with read_only(full):
+        for what in ("tracks", "poses"):
+            tab.worker.submit(tab.download, what)
+            assert tab.wait_idle()
+    (tracks_name, tracks), (poses_name, _) = channel.downloads[-2:]
+    assert tracks_name.endswith("_tracks.zip") and poses_name.endswith("_poses.tum")
+    with zipfile.ZipFile(io.BytesIO(tracks)) as archive:
+        lines = archive.read("T1.txt").decode().splitlines()
+    assert len(lines) == 4 and "nan" not in lines[3].lower()
