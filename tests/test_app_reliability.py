@@ -13,13 +13,16 @@ import shutil
 import subprocess
 import tempfile
 import time
+import tracemalloc
 import weakref
 import zipfile
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from app.browser_text import readable
+from app.canvas import fit_letterbox, letterbox_image
 from app.config import AppConfig
 from autotrack.errors import SessionError
 from tests.browser_socket import SocketBrowser
@@ -255,3 +258,33 @@ def test_downloads_work_while_the_disk_is_full(studio, monkeypatch, tmp_path: Pa
     with zipfile.ZipFile(io.BytesIO(tracks)) as archive:
         lines = archive.read("T1.txt").decode().splitlines()
     assert len(lines) == 4 and "nan" not in lines[3].lower()
+
+
+def test_a_canvas_of_extreme_aspect_costs_no_more_than_its_output() -> None:
+    """Issue 42 item 5: the letterbox allocated the padded frame at full resolution before
+    scaling it down; a 1x1500 canvas made a 960 x 1.44M-pixel frame (about 4 GB)."""
+    frame = np.full((540, 960, 3), 200, dtype=np.uint8)
+    for canvas in ((1, 1500), (1500, 1), (1000, 700)):
+        letterbox = fit_letterbox((960, 540), canvas)
+        tracemalloc.start()
+        try:
+            image = letterbox_image(frame, letterbox, 1000)
+            peak = tracemalloc.get_traced_memory()[1]
+        finally:
+            tracemalloc.stop()
+        assert peak < 8 * 1024**2, f"{canvas}: {peak / 1e6:.0f} MB"
+        assert max(image.shape[:2]) <= 1000 and image.dtype == np.uint8
+        aspect = letterbox.padded_width / letterbox.padded_height
+        assert abs(image.shape[1] / image.shape[0] - aspect) <= aspect * 0.5 + 1 / image.shape[0]
+    assert image.shape[:2] == (672, 960) and image[336, 480].tolist() == [200, 200, 200]
+
+
+def test_a_camera_message_of_no_size_leaves_the_tab_drawing(studio) -> None:
+    """Issue 42 item 10: width/height 0 or negative camera messages raised in the canvas code;
+    the canvas is then drawn at the default size."""
+    for canvas in ((0, 600), (800, -5)):
+        browser, tab = open_socket_tab(studio, canvas=canvas)
+        assert tab.channel.canvas_size() is None
+        browser.wait_for(lambda b=browser: bool(b.messages("BackgroundImageMessage")))
+        assert browser.connection.close_code is None
+        browser.close()
