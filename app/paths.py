@@ -51,6 +51,11 @@ class UploadLimits:
     before anything decodes it, as one decoded frame takes 3 bytes per pixel."""
     max_upload_dir_bytes: int = 8 * 1024**3
     """Quota of the uploads folder (bytes): uploads and unpacked zips together."""
+    free_space_reserve: int = 256 * 1024**2
+    """Disk space an upload must leave free (bytes), checked when it starts and as it is
+    unpacked, so a full disk never stops the recordings."""
+    idle_seconds: float = 60.0
+    """An upload that sends nothing for this long is ended (its space given back)."""
 
 
 def folder_bytes(folder: Path) -> int:
@@ -287,13 +292,35 @@ def safe_file_name(name: str, fallback: str = "upload") -> str:
     return cleaned[:120] or fallback
 
 
+PARTIAL_PREFIX = ".partial-"
+"""An upload being stored: hidden (never listed or opened), renamed into place once complete,
+and deleted at the next start if a killed server left it."""
+
+
 def new_upload_folder(upload_root: Path, label: str) -> Path:
-    """A fresh, uniquely named folder under `upload_root`."""
+    """A fresh, uniquely named folder under `upload_root`, still hidden (`PARTIAL_PREFIX`)."""
     upload_root.mkdir(parents=True, exist_ok=True)
     stamp = time.strftime("%Y%m%d-%H%M%S")
-    folder = upload_root / f"{stamp}_{safe_file_name(label)}_{secrets.token_hex(3)}"
+    name = f"{PARTIAL_PREFIX}{stamp}_{safe_file_name(label)}_{secrets.token_hex(3)}"
+    folder = upload_root / name
     folder.mkdir()
     return folder
+
+
+def completed_upload_folder(partial: Path) -> Path:
+    """Rename a stored upload's folder into place (one rename: all of it or none)."""
+    folder = partial.with_name(partial.name.removeprefix(PARTIAL_PREFIX))
+    partial.rename(folder)
+    return folder
+
+
+def remove_partial_uploads(upload_dir: Path) -> int:
+    """Delete what killed servers left half-stored under `upload_dir` (and its browsers'
+    folders); the count removed."""
+    stale = [*upload_dir.glob(f"{PARTIAL_PREFIX}*"), *upload_dir.glob(f"*/{PARTIAL_PREFIX}*")]
+    for folder in stale:
+        shutil.rmtree(folder, ignore_errors=True)
+    return len(stale)
 
 
 def _member_problem(info: zipfile.ZipInfo) -> str | None:
@@ -379,11 +406,25 @@ def extract_image_zip(
                         written += len(chunk)
                         if written > limits.max_extracted_bytes:
                             raise InputError("the zip unpacks to more than it declares; refused")
+                        _check_room(image_folder, len(chunk), limits)
                         sink.write(chunk)
                         chunk = source.read(1 << 20)
             except (zipfile.BadZipFile, zlib.error, EOFError) as error:
                 raise InputError(f"the zip is damaged at {info.filename} ({error})") from error
+            except OSError as error:
+                reason = error.strerror or type(error).__name__
+                raise InputError(f"cannot unpack the zip on the server ({reason})") from None
     return image_folder
+
+
+def _check_room(folder: Path, size: int, limits: UploadLimits) -> None:
+    """Refuse to write `size` more bytes into `folder` when the disk would keep less than the
+    reserve free."""
+    if shutil.disk_usage(folder).free - size < limits.free_space_reserve:
+        raise InputError(
+            "the server's disk is nearly full: the zip was not unpacked; ask the server's "
+            "owner to free space"
+        )
 
 
 def _check_pixels(name: str, head: bytes, limits: UploadLimits) -> None:
@@ -438,14 +479,13 @@ def store_upload(
         try:
             if suffix == ".zip":
                 extract_image_zip(content, folder, limits, quota_root or upload_root)
-                return folder
-            target = folder / name
+                return completed_upload_folder(folder)
             if isinstance(content, Path):
-                shutil.move(content, target)
+                shutil.move(content, folder / name)
             else:
-                with open(target, "xb") as sink:
+                with open(folder / name, "xb") as sink:
                     sink.write(content)
-            return target
+            return completed_upload_folder(folder) / name
         except BaseException:
             shutil.rmtree(folder, ignore_errors=True)
             raise

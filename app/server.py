@@ -127,7 +127,12 @@ class StudioServer:
             worker_pool=self.worker_pool,
         )
         self.uploads.attach(
-            gui, tab.panels.sequence.upload, tab_id, tab.receive_upload_file, tab.refuse_upload
+            gui,
+            tab.panels.sequence.upload,
+            tab_id,
+            tab.receive_upload_file,
+            tab.refuse_upload,
+            browser=space.tag,
         )
         with self._lock:
             self.tabs[tab_id] = tab

@@ -17,6 +17,7 @@ import contextlib
 import os
 import shutil
 import threading
+import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -24,7 +25,13 @@ from typing import BinaryIO
 
 import viser
 
-from app.paths import VIDEO_SUFFIXES, UploadLimits, folder_bytes, safe_file_name
+from app.paths import (
+    VIDEO_SUFFIXES,
+    UploadLimits,
+    folder_bytes,
+    remove_partial_uploads,
+    safe_file_name,
+)
 from app.viser_private import (
     UploadHandlers,
     UploadPart,
@@ -34,23 +41,27 @@ from app.viser_private import (
     upload_button_id,
 )
 
-FREE_SPACE_RESERVE = 256 * 1024**2
-"""Disk space an upload must leave free (bytes), so a full disk never stops the recordings."""
-
 
 @dataclass
 class _Transfer:
     """One upload in progress."""
 
     tab_id: int
+    browser: str | None
     button: str
     name: str
     declared: int
     part_count: int
     path: Path
     sink: BinaryIO
+    last_seen: float
+    """When its last message arrived (the receiver's clock)."""
     received: int = 0
     next_part: int = 0
+
+
+STALLED = "the upload stopped arriving and was ended; upload the file again"
+"""Told to a tab whose upload sent nothing for `UploadLimits.idle_seconds`."""
 
 
 @dataclass
@@ -68,15 +79,25 @@ class _Button:
     tab_id: int
     deliver: Callable[[str, Path], None]
     refuse: Callable[[str], None]
+    browser: str | None = None
+    """The browser of its tab (None: a space of its own)."""
 
 
 class UploadReceiver:
     """Receives the uploads of every tab's upload button into `incoming`."""
 
-    def __init__(self, incoming: Path, upload_dir: Path, limits: UploadLimits) -> None:
+    def __init__(
+        self,
+        incoming: Path,
+        upload_dir: Path,
+        limits: UploadLimits,
+        clock: Callable[[], float] = time.monotonic,
+    ) -> None:
         self.incoming = incoming
         self.upload_dir = upload_dir
         self.limits = limits
+        self.clock = clock
+        """Seconds, for the idle timeout (time.monotonic; tests pass their own)."""
         self._lock = threading.Lock()
         self._buttons: dict[str, _Button] = {}
         self._transfers: dict[str, _Transfer] = {}
@@ -84,6 +105,7 @@ class UploadReceiver:
         """The GUIs whose uploads we receive, by id (a client's, or the server's in tests)."""
         shutil.rmtree(incoming, ignore_errors=True)  # what a killed server left behind
         incoming.mkdir(parents=True, exist_ok=True)
+        remove_partial_uploads(upload_dir)
 
     def attach(
         self,
@@ -92,11 +114,13 @@ class UploadReceiver:
         tab_id: int,
         deliver: Callable[[str, Path], None],
         refuse: Callable[[str], None],
+        browser: str | None = None,
     ) -> None:
         """Receive `button`'s uploads: `deliver(name, path)` gets each complete file (it owns
-        the file from then on), `refuse(message)` each refusal."""
+        the file from then on), `refuse(message)` each refusal. Tabs of one `browser` have one
+        upload in flight between them."""
         with self._lock:
-            self._buttons[upload_button_id(button)] = _Button(tab_id, deliver, refuse)
+            self._buttons[upload_button_id(button)] = _Button(tab_id, deliver, refuse, browser)
             interface = self._interfaces.get(id(gui))
             if interface is None:
                 handlers = take_over_uploads(gui, self._start, self._part)
@@ -124,7 +148,25 @@ class UploadReceiver:
         with self._lock:
             return len(self._transfers)
 
-    def _problem(self, tab_id: int, name: str, declared: int) -> str | None:
+    def _end_stalled(self) -> list[_Button]:
+        """End the transfers that sent nothing for `idle_seconds` (called under the lock):
+        their files are deleted and their space counts no more; their buttons, to tell."""
+        now = self.clock()
+        stalled = [
+            key
+            for key, transfer in self._transfers.items()
+            if now - transfer.last_seen > self.limits.idle_seconds
+        ]
+        told = []
+        for key in stalled:
+            transfer = self._transfers.pop(key)
+            _discard(transfer)
+            button = self._buttons.get(transfer.button)
+            if button is not None:
+                told.append(button)
+        return told
+
+    def _problem(self, button: _Button, name: str, declared: int) -> str | None:
         """Why a transfer must be refused at its start (called under the lock)."""
         limits = self.limits
         suffix = Path(safe_file_name(name)).suffix.lower()
@@ -137,15 +179,20 @@ class UploadReceiver:
                 f"the upload is {declared / 1e6:.0f} MB; the limit is "
                 f"{limits.max_upload_bytes / 1e6:.0f} MB"
             )
-        if any(transfer.tab_id == tab_id for transfer in self._transfers.values()):
-            return "an upload from this tab is still arriving; wait for it to finish"
+        if any(
+            transfer.tab_id == button.tab_id
+            or (button.browser is not None and transfer.browser == button.browser)
+            for transfer in self._transfers.values()
+        ):
+            return "an upload from this browser is still arriving; wait for it to finish"
         pending = sum(transfer.declared for transfer in self._transfers.values())
         if folder_bytes(self.upload_dir) + pending + declared > limits.max_upload_dir_bytes:
             return (
                 f"the uploads folder would exceed its quota of "
                 f"{limits.max_upload_dir_bytes / 1e9:.1f} GB; ask the server's owner to clear it"
             )
-        if shutil.disk_usage(self.incoming).free < pending + declared + FREE_SPACE_RESERVE:
+        free = shutil.disk_usage(self.incoming).free
+        if free < pending + declared + limits.free_space_reserve:
             return "the server's disk has no room for this upload"
         return None
 
@@ -154,7 +201,8 @@ class UploadReceiver:
             button = self._buttons.get(message.source_component_uuid)
             if button is None or button.tab_id != client_id:
                 return
-            problem = self._problem(button.tab_id, message.filename, message.size_bytes)
+            stalled = self._end_stalled()
+            problem = self._problem(button, message.filename, message.size_bytes)
             if problem is None:
                 path = self.incoming / f"{os.getpid()}-{safe_file_name(message.transfer_uuid)}.part"
                 try:
@@ -164,13 +212,17 @@ class UploadReceiver:
                 else:
                     self._transfers[message.transfer_uuid] = _Transfer(
                         button.tab_id,
+                        button.browser,
                         message.source_component_uuid,
                         message.filename,
                         message.size_bytes,
                         message.part_count,
                         path,
                         sink,
+                        last_seen=self.clock(),
                     )
+        for idle in stalled:
+            idle.refuse(STALLED)
         if problem is not None:
             acknowledge_upload(handlers, message.source_component_uuid, message.transfer_uuid, 1, 1)
             button.refuse(problem)
@@ -199,6 +251,7 @@ class UploadReceiver:
             if problem is None:
                 transfer.received += size
                 transfer.next_part += 1
+                transfer.last_seen = self.clock()
                 done = transfer.next_part == transfer.part_count
                 if done and transfer.received != transfer.declared:
                     problem = "the upload is smaller than it declared; refused"

@@ -4,6 +4,7 @@ read-only and full disks, stalled uploads. Tabs are driven over real websockets
 
 from __future__ import annotations
 
+import collections
 import contextlib
 import errno
 import gc
@@ -24,7 +25,9 @@ import pytest
 from app.browser_text import readable
 from app.canvas import fit_letterbox, letterbox_image
 from app.config import AppConfig
-from autotrack.errors import SessionError
+from app.paths import PARTIAL_PREFIX, UploadLimits, find_sequences, store_upload
+from app.viser_private import UploadPart, UploadStart, deliver_as_client, upload_button_id
+from autotrack.errors import InputError, SessionError
 from tests.browser_socket import SocketBrowser
 from tests.test_app import DEMO, _draw_demo_boxes, _open_tab
 
@@ -288,3 +291,107 @@ def test_a_camera_message_of_no_size_leaves_the_tab_drawing(studio) -> None:
         browser.wait_for(lambda b=browser: bool(b.messages("BackgroundImageMessage")))
         assert browser.connection.close_code is None
         browser.close()
+
+
+# -- uploads (issue 42 items 6-8) -----------------------------------------------------------------
+
+PART = 512 * 1024
+DiskUsage = collections.namedtuple("DiskUsage", "total used free")
+"""What shutil.disk_usage answers."""
+
+
+class _UploadingTab:
+    """A tab on the server's GUI whose upload messages arrive as from client `tab_id`."""
+
+    def __init__(self, studio, tab_id: int, browser: str) -> None:  # noqa: ANN001
+        self.studio, self.tab_id = studio, tab_id
+        self.tab, self.channel = _open_tab(studio, tab_id=tab_id, browser=browser)
+        self.button = upload_button_id(self.tab.panels.sequence.upload)
+
+    def start(self, transfer: str, parts: int) -> None:
+        message = UploadStart(self.button, transfer, f"{transfer}.mp4", "", parts, parts * PART)
+        deliver_as_client(self.studio.viser, self.tab_id, message)
+
+    def part(self, transfer: str, index: int) -> None:
+        message = UploadPart(self.button, transfer, index, bytes(PART))
+        deliver_as_client(self.studio.viser, self.tab_id, message)
+
+    def last_note(self) -> str:
+        return self.channel.notes[-1][0] if self.channel.notes else ""
+
+
+def test_a_stalled_upload_is_ended_and_one_browser_has_one_upload_in_flight(studio) -> None:
+    """Issue 42 item 6: uploads that sent one part and then nothing held the quota for as long
+    as their tabs stayed open, locking every other browser out."""
+    now = [1000.0]
+    studio.uploads.clock = lambda: now[0]
+    studio.uploads.limits = UploadLimits(max_upload_dir_bytes=15 * PART, idle_seconds=60.0)
+    stalling = _UploadingTab(studio, 1, "mallory")
+    same_browser = _UploadingTab(studio, 2, "mallory")
+    other = _UploadingTab(studio, 3, "alice")
+    stalling.start("stalled", 10)
+    stalling.part("stalled", 0)
+    same_browser.start("second", 2)
+    assert "an upload from this browser is still arriving" in same_browser.last_note()
+    now[0] += 30.0
+    other.start("wanted", 10)
+    assert "quota" in other.last_note()  # still arriving, as far as anyone can tell
+    now[0] += 31.0  # 61 s without a part
+    other.start("wanted", 10)
+    assert "stopped arriving" in stalling.last_note()
+    assert studio.uploads.in_flight() == 1
+    for index in range(10):
+        other.part("wanted", index)
+        now[0] += 59.0  # slow but steady: never idle for 60 s
+    assert studio.uploads.in_flight() == 0
+    assert other.tab.wait_idle()
+    assert not any("stopped arriving" in note for note, _ in other.channel.notes)
+
+
+def test_a_half_stored_upload_is_hidden_and_removed_at_the_next_start(tmp_path: Path) -> None:
+    """Issue 42 item 7: a server killed while unpacking left a partial upload that counted
+    against the quota, was listed to its owner and opened as a shorter sequence."""
+    from app.server import StudioServer
+
+    config = AppConfig(port=0, sessions_dir=tmp_path / "sessions", demo_dir=DEMO, token="t")
+    browser_uploads = config.upload_dir / "browser-0123456789abcdef"
+    stored = store_upload("clip.zip", _zip_of_frames(3), browser_uploads, UploadLimits())
+    assert not stored.name.startswith(PARTIAL_PREFIX) and len(list(stored.glob("img/*"))) == 3
+    killed = browser_uploads / f"{PARTIAL_PREFIX}20261202-000000_clip_abcdef"
+    shutil.copytree(stored, killed)  # what a kill -9 mid-unpack leaves
+    assert find_sequences((browser_uploads,)) == [stored]  # never listed
+    server = StudioServer(config)
+    try:
+        assert not killed.exists() and stored.is_dir()
+    finally:
+        server.stop()
+
+
+def _zip_of_frames(count: int, size: int = 0) -> bytes:
+    """A zip of `count` demo frames, each padded by `size` bytes of zeros (still a JPEG)."""
+    frames = sorted((DEMO / "img").iterdir())
+    buffer = io.BytesIO()
+    with zipfile.ZipFile(buffer, "w", zipfile.ZIP_DEFLATED) as archive:
+        for index in range(count):
+            archive.writestr(f"{index:04d}.jpg", frames[index].read_bytes() + bytes(size))
+    return buffer.getvalue()
+
+
+def test_unpacking_stops_at_the_free_space_reserve(tmp_path: Path, monkeypatch) -> None:
+    """Issue 42 item 8: the 256 MB reserve was checked only when an upload started; a small zip
+    of large uniform images drove free space to 3 MB and ended in "internal error: OSError"."""
+    uploads = tmp_path / "uploads"
+    disk = 400 * 1024**2  # the disk as this test sees it: 400 MB free before the upload
+
+    def usage(path) -> DiskUsage:  # noqa: ANN001
+        used = sum(f.stat().st_size for f in uploads.rglob("*") if f.is_file())
+        return DiskUsage(disk, used, disk - used)
+
+    monkeypatch.setattr(shutil, "disk_usage", usage)
+    content = _zip_of_frames(20, size=4 * 1024**2)  # 20 x 4 MB unpacked, well within limits
+    assert len(content) < 2 * 1024**2
+    with pytest.raises(InputError, match="^the server's disk is nearly full: the zip was not"):
+        store_upload("big.zip", content, uploads, UploadLimits(free_space_reserve=360 * 1024**2))
+    assert list(uploads.iterdir()) == []
+    stored = store_upload("big.zip", content, uploads, UploadLimits())  # 256 MB: it fits
+    assert len(list(stored.glob("img/*"))) == 20
