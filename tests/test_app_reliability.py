@@ -11,6 +11,7 @@ import gc
 import io
 import os
 import shutil
+import socket
 import subprocess
 import tempfile
 import time
@@ -395,3 +396,38 @@ def test_unpacking_stops_at_the_free_space_reserve(tmp_path: Path, monkeypatch) 
     assert list(uploads.iterdir()) == []
     stored = store_upload("big.zip", content, uploads, UploadLimits())  # 256 MB: it fits
     assert len(list(stored.glob("img/*"))) == 20
+
+
+def _status_of(port: int, request_lines: list[str]) -> int:
+    """The HTTP status the server answers a raw request with (headers sent as given)."""
+    with socket.create_connection(("127.0.0.1", port), timeout=30) as connection:
+        connection.sendall(("\r\n".join(request_lines) + "\r\n\r\n").encode("utf-8"))
+        answer = b""
+        while b"\r\n" not in answer:
+            chunk = connection.recv(4096)
+            if not chunk:
+                break
+            answer += chunk
+    return int(answer.split(b" ", 2)[1])
+
+
+@pytest.mark.parametrize(
+    "lines",
+    [
+        ["GET /?token=%C3%A9t%C3%A9 HTTP/1.1", "Host: 127.0.0.1"],  # a non-ASCII token
+        ["GET / HTTP/1.1", "Host: 127.0.0.1", "Cookie: autotrack_token_PORT=été"],
+        ["GET /?token=secret-token HTTP/1.1", "Host: 127.0.0.1", "Host: evil.example"],
+        [
+            "GET /?token=secret-token HTTP/1.1",
+            "Host: 127.0.0.1:PORT",
+            "Origin: http://127.0.0.1:PORT",
+            "Origin: http://evil.example",
+        ],
+        ["GET /?token=secret-token HTTP/1.1", "Host: [::1"],  # no host a URL can hold
+    ],
+)
+def test_every_malformed_token_or_header_gets_403(studio, lines) -> None:
+    """Issue 42 item 10: a non-ASCII token or duplicate Host/Origin headers gave HTTP 500."""
+    port = studio.port
+    assert _status_of(port, ["GET /?token=secret-token HTTP/1.1", "Host: 127.0.0.1"]) == 200
+    assert _status_of(port, [line.replace("PORT", str(port)) for line in lines]) == 403
