@@ -18,19 +18,17 @@ flags, kept a year), by which tabs of one browser share sessions and uploads and
 other browsers' (`app/owners.py`).
 
 viser builds its websockets server inside `ViserServer.__init__` and offers no hook, so
-`guarded_handshakes` wraps `websockets.asyncio.server.serve` while the server starts and puts
-the check in front of viser's own `process_request`. If viser stops calling `serve` that way
-the check is not installed and the server refuses to start (`AccessGuard.installed`).
+`app/viser_private.py`'s `guard_handshakes` puts `AccessGuard.wrap` in front of viser's own
+`process_request` while the server starts. If viser stops starting its server that way the
+check is not installed and the server refuses to start (`AccessGuard.installed`).
 """
 
 from __future__ import annotations
 
-import contextlib
 import hmac
 import http
 import secrets
-import threading
-from collections.abc import Callable, Iterator
+from collections.abc import Callable
 from http.cookies import CookieError, SimpleCookie
 from urllib.parse import parse_qs, urlsplit
 
@@ -43,7 +41,6 @@ WILDCARD_HOSTS = frozenset({"0.0.0.0", "::", ""})
 """Bind addresses meaning every interface."""
 
 ProcessRequest = Callable[[object, Request], Response | None]
-_PATCH_LOCK = threading.Lock()
 
 
 def new_token() -> str:
@@ -51,9 +48,17 @@ def new_token() -> str:
     return secrets.token_urlsafe(24)
 
 
+def _same_secret(given: str, token: str) -> bool:
+    """Whether `given` is the token, in constant time (any text: compared as UTF-8 bytes)."""
+    return hmac.compare_digest(given.encode("utf-8", "surrogateescape"), token.encode("utf-8"))
+
+
 def _host_name(netloc: str) -> str:
     """The host part of `host[:port]` or `[v6]:port`, lower-cased."""
-    return (urlsplit(f"//{netloc}").hostname or "").lower()
+    try:
+        return (urlsplit(f"//{netloc}").hostname or "").lower()
+    except ValueError:  # e.g. an unclosed IPv6 bracket
+        return ""
 
 
 class AccessGuard:
@@ -83,7 +88,7 @@ class AccessGuard:
     def _cookie(self, headers: Headers, name: str) -> str | None:
         cookie = SimpleCookie()
         try:
-            cookie.load(headers.get("Cookie", ""))
+            cookie.load("; ".join(headers.get_all("Cookie")))
         except CookieError:
             return None
         morsel = cookie.get(name)
@@ -106,19 +111,23 @@ class AccessGuard:
         if self.token is None:
             return True, False
         query = parse_qs(urlsplit(request.path).query).get("token", [])
-        if any(hmac.compare_digest(value, self.token) for value in query):
+        if any(_same_secret(value, self.token) for value in query):
             return True, True
         value = self._cookie(request.headers, self.cookie_name)
-        return value is not None and hmac.compare_digest(value, self.token), False
+        return value is not None and _same_secret(value, self.token), False
 
     def problem(self, request: Request) -> str | None:
         """Why `request` is refused, or None when it may go on."""
-        host = request.headers.get("Host", "")
+        hosts = request.headers.get_all("Host")
+        origins = request.headers.get_all("Origin")
+        if len(hosts) > 1 or len(origins) > 1:
+            return "a request may carry one Host and at most one Origin header"
+        host = hosts[0] if hosts else ""
         if not self.host_allowed(host):
-            return f"Host {host!r} does not name this server"
-        origin = request.headers.get("Origin")
+            return f"Host {host[:100]!r} does not name this server"
+        origin = origins[0] if origins else None
         if origin is not None and urlsplit(origin).netloc.lower() != host.lower():
-            return f"requests from {origin!r} are not accepted"
+            return f"requests from {origin[:100]!r} are not accepted"
         if not self._token_given(request)[0]:
             return "the access token is missing or wrong: open the URL `autotrack app` printed"
         return None
@@ -129,7 +138,10 @@ class AccessGuard:
         self.installed = True
 
         def process_request(connection: object, request: Request) -> Response | None:
-            reason = self.problem(request)
+            try:
+                reason = self.problem(request)
+            except ValueError:  # a header no check can read (a malformed URL)
+                reason = "the request's headers are malformed"
             if reason is not None:
                 self.refused += 1
                 return Response(
@@ -152,22 +164,3 @@ class AccessGuard:
             return response
 
         return process_request
-
-
-@contextlib.contextmanager
-def guarded_handshakes(guard: AccessGuard) -> Iterator[None]:
-    """While the block runs, every websockets server started gets `guard` in front of its
-    `process_request` (the block should start exactly one: viser's)."""
-    import websockets.asyncio.server as ws_server
-
-    with _PATCH_LOCK:
-        original = ws_server.serve
-
-        def serve(*args, process_request=None, **kwargs):  # noqa: ANN002, ANN003, ANN202
-            return original(*args, process_request=guard.wrap(process_request), **kwargs)
-
-        ws_server.serve = serve
-        try:
-            yield
-        finally:
-            ws_server.serve = original

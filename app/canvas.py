@@ -112,17 +112,21 @@ def fit_letterbox(frame_size: tuple[int, int], canvas_size: tuple[int, int]) -> 
 
 
 def letterbox_image(image: np.ndarray, letterbox: Letterbox, max_width: int) -> np.ndarray:
-    """The RGB frame padded with black to the letterbox, scaled down to at most `max_width`."""
-    padded = np.zeros((letterbox.padded_height, letterbox.padded_width, 3), dtype=np.uint8)
+    """The RGB frame padded with black to the letterbox, scaled down to at most `max_width`
+    wide and `max_width` high. Only the output is allocated (the frame is scaled, then padded):
+    a canvas of extreme aspect (1x1500) costs no more than a square one."""
+    scale = min(1.0, max_width / letterbox.padded_width, max_width / letterbox.padded_height)
+    width = max(1, round(letterbox.padded_width * scale))
+    height = max(1, round(letterbox.padded_height * scale))
     rgb = as_rgb(image)
-    padded[
-        letterbox.offset_y : letterbox.offset_y + letterbox.frame_height,
-        letterbox.offset_x : letterbox.offset_x + letterbox.frame_width,
-    ] = rgb
-    if letterbox.padded_width > max_width:
-        scale = max_width / letterbox.padded_width
-        size = (max_width, max(1, round(letterbox.padded_height * scale)))
-        padded = cv2.resize(padded, size, interpolation=cv2.INTER_AREA)
+    if scale < 1.0:
+        frame_width = min(width, max(1, round(letterbox.frame_width * scale)))
+        frame_height = min(height, max(1, round(letterbox.frame_height * scale)))
+        rgb = cv2.resize(rgb, (frame_width, frame_height), interpolation=cv2.INTER_AREA)
+    padded = np.zeros((height, width, 3), dtype=np.uint8)
+    top = min(round(letterbox.offset_y * scale), height - rgb.shape[0])
+    left = min(round(letterbox.offset_x * scale), width - rgb.shape[1])
+    padded[top : top + rgb.shape[0], left : left + rgb.shape[1]] = rgb
     return padded
 
 

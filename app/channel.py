@@ -68,7 +68,8 @@ class ViserClientChannel:
     def canvas_size(self) -> tuple[int, int] | None:
         # viser reports a client as connected only after its first camera message.
         camera = self.client.camera
-        return (camera.image_width, camera.image_height)
+        size = (camera.image_width, camera.image_height)
+        return size if min(size) > 0 else None  # a canvas of no size: as if not yet known
 
     def on_canvas_change(self, callback: Callable[[], None]) -> None:
         self.client.camera.on_update(lambda _camera: callback())

@@ -269,13 +269,15 @@ class TabController(SessionCommands):
         """Close the run: its trackers, frames and recording (released for other tabs)."""
         if self.run is None:
             return
-        self.run.close()
-        self.run.frames.close()
-        finished = self.recording_path
+        run, finished = self.run, self.recording_path
         self.run, self.recording_path, self.boxes_path, self.truth = None, None, None, None
-        if finished is not None:
-            self.recordings.release(finished)
-            self.refresh_sessions()  # the finished session is listed at once
+        try:
+            run.close()  # may raise (a full disk): the file and the frames are let go anyway
+        finally:
+            run.frames.close()
+            if finished is not None:
+                self.recordings.release(finished)
+                self.refresh_sessions()  # the finished session is listed at once
 
     def claim_recording(self) -> None:
         """Register the run's session file (created at the first edit) as this tab's."""
@@ -484,5 +486,7 @@ class TabController(SessionCommands):
     def close(self) -> None:
         """Stop playing and close the run (finishing its recording)."""
         self.stop_playing()
-        self.close_run()
-        self.space.release()
+        try:
+            self.close_run()
+        finally:
+            self.space.release()

@@ -2,12 +2,14 @@
 
 from __future__ import annotations
 
+import contextlib
+import os
 import tempfile
 import zipfile
 from io import BytesIO
 from pathlib import Path
 
-from autotrack.errors import InputError
+from autotrack.errors import AutoTrackError, InputError
 from autotrack.pipeline import Pipeline
 from autotrack.sessions import open_session, write_otb_tracks, write_tracks_csv, write_tum_poses
 from autotrack.sessions.snapshot import finished_copy
@@ -23,7 +25,8 @@ def build(run: Pipeline, what: str) -> tuple[str, bytes]:
     path = run.session_path or (run.resumed_from if run.recording is None else None)
     if path is None:
         raise InputError("nothing recorded yet: draw a box and track first")
-    run.flush()
+    with contextlib.suppress(OSError, AutoTrackError):  # a full disk: what the file holds
+        run.flush()
     if what == "tracks":
         return f"{path.stem}_tracks.zip", tracks_zip(path)
     if what == "poses":
@@ -37,7 +40,7 @@ def tracks_zip(session_path: Path) -> bytes:
     """A zip of one OTB-style `<target>.txt` per target (1-based x, y) plus `tracks.csv`
     (0-based, with score and aberrance), read from the session file."""
     session = open_session(session_path)
-    with tempfile.TemporaryDirectory(prefix="autotrack-export-") as folder:
+    with tempfile.TemporaryDirectory(prefix="autotrack-export-", dir=_scratch()) as folder:
         folder_path = Path(folder)
         paths = write_otb_tracks(session, folder_path / "otb")
         csv_path = write_tracks_csv(session, folder_path / "tracks.csv")
@@ -52,7 +55,17 @@ def tracks_zip(session_path: Path) -> bytes:
 def poses_tum(session_path: Path) -> bytes:
     """The session's valid camera poses in the TUM format (timestamp = frame index / fps)."""
     session = open_session(session_path)
-    with tempfile.TemporaryDirectory(prefix="autotrack-export-") as folder:
+    with tempfile.TemporaryDirectory(prefix="autotrack-export-", dir=_scratch()) as folder:
         path = Path(folder) / "poses.tum"
         write_tum_poses(session, path)
         return path.read_bytes()
+
+
+MEMORY_FOLDER = Path("/dev/shm")
+"""A folder in memory (Linux): the exporters' scratch files, so a full disk blocks no download."""
+
+
+def _scratch() -> Path | None:
+    """Where an export's scratch files go: memory where the system offers it, else the
+    temporary folder."""
+    return MEMORY_FOLDER if os.access(MEMORY_FOLDER, os.W_OK | os.X_OK) else None

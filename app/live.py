@@ -19,6 +19,7 @@ from pathlib import Path
 
 import numpy as np
 
+from app.browser_text import markdown_literal
 from app.controller import POSE_OPTIONS, TabController
 from app.paths import display_name, live_source
 from app.views import FrameView, SignalHistory
@@ -343,7 +344,7 @@ def preview_view(frame: CapturedFrame, name: str, message: str) -> FrameView:
         last_frame=-1,
         frame_count=count,
     )
-    status = f"**{name}** · live preview, frame {count}"
+    status = f"**{markdown_literal(name)}** · live preview, frame {count}"
     return FrameView(
         frame_index=frame.index,
         frame_count=count,
@@ -351,5 +352,5 @@ def preview_view(frame: CapturedFrame, name: str, message: str) -> FrameView:
         drawings={},
         pose_view=None,
         history=history,
-        status=f"{status}\n\n{message}" if message else status,
+        status=f"{status}\n\n{markdown_literal(message)}" if message else status,
     )

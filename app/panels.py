@@ -16,6 +16,7 @@ import numpy as np
 import viser
 
 from app.boxes import format_box
+from app.browser_text import markdown_literal
 from app.config import AppConfig
 from app.controller import TabController
 from app.live import DISABLED_HINT, FROZEN, OFF, PREVIEW, TRACKING, LiveControl
@@ -374,7 +375,7 @@ def show_state(panels: Panels, controller: TabController) -> None:
     recording = "Not recording yet (draw a box)." if path is None else f"Recording to `{path.name}`"
     quiet.set(session.recording, "content", recording)
     if run is None:
-        quiet.set(panels.status, "content", controller.message)
+        quiet.set(panels.status, "content", markdown_literal(controller.message))
 
 
 def show_opened(panels: Panels, controller: TabController) -> None:

@@ -14,6 +14,7 @@ import re
 import secrets
 import shutil
 import stat
+import tempfile
 import time
 import zipfile
 import zlib
@@ -22,6 +23,7 @@ from dataclasses import dataclass
 from io import BytesIO
 from pathlib import Path, PurePosixPath
 
+from app.browser_text import readable
 from app.owners import SPACE_PREFIX
 from autotrack.errors import InputError
 from autotrack.io.frames import IMAGE_EXTENSIONS, VIDEO_EXTENSIONS
@@ -49,6 +51,11 @@ class UploadLimits:
     before anything decodes it, as one decoded frame takes 3 bytes per pixel."""
     max_upload_dir_bytes: int = 8 * 1024**3
     """Quota of the uploads folder (bytes): uploads and unpacked zips together."""
+    free_space_reserve: int = 256 * 1024**2
+    """Disk space an upload must leave free (bytes), checked when it starts and as it is
+    unpacked, so a full disk never stops the recordings."""
+    idle_seconds: float = 60.0
+    """An upload that sends nothing for this long is ended (its space given back)."""
 
 
 def folder_bytes(folder: Path) -> int:
@@ -90,11 +97,9 @@ def resolve_user_path(text: str, roots: Sequence[Path]) -> Path:
         raise InputError("type a path to a sequence folder, an image folder or a video")
     if "\x00" in cleaned:
         raise InputError("the path contains a NUL character")
-    typed = Path(cleaned)
-    candidates = [typed] if typed.is_absolute() else [root / typed for root in roots]
-    if not typed.is_absolute() and typed.parts:  # as the app shows it: `<root name>/...`
-        rest = Path(*typed.parts[1:]) if len(typed.parts) > 1 else Path()
-        candidates += [root / rest for root in roots if _root_label(root) == typed.parts[0]]
+    candidates = []
+    for spelling in dict.fromkeys((cleaned, _unescaped(cleaned))):  # as typed, then unescaped
+        candidates += _candidates(Path(spelling), roots)
     for candidate in candidates:
         try:
             resolved = candidate.resolve(strict=True)
@@ -103,9 +108,42 @@ def resolve_user_path(text: str, roots: Sequence[Path]) -> Path:
         if is_under(resolved, roots):
             return resolved
     raise InputError(
-        f"{cleaned}: no such file or folder among those this server may open; to open other "
-        "folders, restart the app with --allow-root DIR"
+        f"{readable(_clipped(cleaned))}: no such file or folder among those this server may "
+        "open; to open other folders, restart the app with --allow-root DIR"
     )
+
+
+def _candidates(typed: Path, roots: Sequence[Path]) -> list[Path]:
+    """Where a typed path may be: itself if absolute, else under each root, or under the root
+    its first component names (as the app shows paths: `<root name>/...`)."""
+    if typed.is_absolute():
+        return [typed]
+    candidates = [root / typed for root in roots]
+    if typed.parts:
+        rest = Path(*typed.parts[1:]) if len(typed.parts) > 1 else Path()
+        candidates += [root / rest for root in roots if _root_label(root) == typed.parts[0]]
+    return candidates
+
+
+MAX_ECHOED = 120
+"""The most characters of a typed text a message repeats."""
+
+
+def _clipped(text: str) -> str:
+    """`text`, cut to MAX_ECHOED characters (a 1 MB paste is not echoed back whole)."""
+    return text if len(text) <= MAX_ECHOED else f"{text[: MAX_ECHOED - 1]}…"
+
+
+def check_writable(folder: Path, what: str) -> None:
+    """Refuse (InputError, one line) when no file can be created in `folder` (read-only, no
+    permission), before anything that would need one is torn down."""
+    try:
+        folder.mkdir(parents=True, exist_ok=True)
+        with tempfile.TemporaryFile(dir=folder):
+            pass
+    except OSError as error:
+        reason = error.strerror or type(error).__name__
+        raise InputError(f"cannot write to the {what} folder {folder} ({reason})") from None
 
 
 def looks_like_sequence(path: Path) -> bool:
@@ -191,16 +229,25 @@ def live_source(text: str, roots: Sequence[Path]) -> Path | str:
     return path
 
 
+def _unescaped(text: str) -> str:
+    """The name `readable` (app/browser_text.py) wrote as `text` (its `\\xNN` escapes back as the bytes they name)."""
+    return _ESCAPED_BYTE.sub(lambda match: chr(0xDC00 + int(match.group(1), 16)), text)
+
+
+_ESCAPED_BYTE = re.compile(r"\\x([89a-fA-F][0-9a-fA-F])")
+"""A byte of a non-UTF-8 name as `readable` writes it (only bytes >= 0x80 are escaped)."""
+
+
 def display_name(path: Path, roots: Sequence[Path]) -> str:
     """`path` relative to the root that holds it (prefixed by the root's name; a browser's
-    own upload folder is named after the uploads folder that holds it)."""
+    own upload folder is named after the uploads folder that holds it), made `readable`."""
     for root in roots:
         label = _root_label(root)
         if path == root:
-            return label
+            return readable(label)
         if path.is_relative_to(root):
-            return f"{label}/{path.relative_to(root).as_posix()}"
-    return path.name
+            return readable(f"{label}/{path.relative_to(root).as_posix()}")
+    return readable(path.name)
 
 
 def _root_label(root: Path) -> str:
@@ -232,7 +279,7 @@ def shown_paths(text: str, roots: Sequence[Path], private: Sequence[Path] = ()) 
     for url in _URL.finditer(text):
         shown += [hidden(text[start : url.start()]), url.group(0)]
         start = url.end()
-    return "".join([*shown, hidden(text[start:])])
+    return readable("".join([*shown, hidden(text[start:])]))
 
 
 _SAFE_NAME = re.compile(r"[^A-Za-z0-9._-]+")
@@ -245,13 +292,35 @@ def safe_file_name(name: str, fallback: str = "upload") -> str:
     return cleaned[:120] or fallback
 
 
+PARTIAL_PREFIX = ".partial-"
+"""An upload being stored: hidden (never listed or opened), renamed into place once complete,
+and deleted at the next start if a killed server left it."""
+
+
 def new_upload_folder(upload_root: Path, label: str) -> Path:
-    """A fresh, uniquely named folder under `upload_root`."""
+    """A fresh, uniquely named folder under `upload_root`, still hidden (`PARTIAL_PREFIX`)."""
     upload_root.mkdir(parents=True, exist_ok=True)
     stamp = time.strftime("%Y%m%d-%H%M%S")
-    folder = upload_root / f"{stamp}_{safe_file_name(label)}_{secrets.token_hex(3)}"
+    name = f"{PARTIAL_PREFIX}{stamp}_{safe_file_name(label)}_{secrets.token_hex(3)}"
+    folder = upload_root / name
     folder.mkdir()
     return folder
+
+
+def completed_upload_folder(partial: Path) -> Path:
+    """Rename a stored upload's folder into place (one rename: all of it or none)."""
+    folder = partial.with_name(partial.name.removeprefix(PARTIAL_PREFIX))
+    partial.rename(folder)
+    return folder
+
+
+def remove_partial_uploads(upload_dir: Path) -> int:
+    """Delete what killed servers left half-stored under `upload_dir` (and its browsers'
+    folders); the count removed."""
+    stale = [*upload_dir.glob(f"{PARTIAL_PREFIX}*"), *upload_dir.glob(f"*/{PARTIAL_PREFIX}*")]
+    for folder in stale:
+        shutil.rmtree(folder, ignore_errors=True)
+    return len(stale)
 
 
 def _member_problem(info: zipfile.ZipInfo) -> str | None:
@@ -337,11 +406,25 @@ def extract_image_zip(
                         written += len(chunk)
                         if written > limits.max_extracted_bytes:
                             raise InputError("the zip unpacks to more than it declares; refused")
+                        _check_room(image_folder, len(chunk), limits)
                         sink.write(chunk)
                         chunk = source.read(1 << 20)
             except (zipfile.BadZipFile, zlib.error, EOFError) as error:
                 raise InputError(f"the zip is damaged at {info.filename} ({error})") from error
+            except OSError as error:
+                reason = error.strerror or type(error).__name__
+                raise InputError(f"cannot unpack the zip on the server ({reason})") from None
     return image_folder
+
+
+def _check_room(folder: Path, size: int, limits: UploadLimits) -> None:
+    """Refuse to write `size` more bytes into `folder` when the disk would keep less than the
+    reserve free."""
+    if shutil.disk_usage(folder).free - size < limits.free_space_reserve:
+        raise InputError(
+            "the server's disk is nearly full: the zip was not unpacked; ask the server's "
+            "owner to free space"
+        )
 
 
 def _check_pixels(name: str, head: bytes, limits: UploadLimits) -> None:
@@ -396,14 +479,13 @@ def store_upload(
         try:
             if suffix == ".zip":
                 extract_image_zip(content, folder, limits, quota_root or upload_root)
-                return folder
-            target = folder / name
+                return completed_upload_folder(folder)
             if isinstance(content, Path):
-                shutil.move(content, target)
+                shutil.move(content, folder / name)
             else:
-                with open(target, "xb") as sink:
+                with open(folder / name, "xb") as sink:
                     sink.write(content)
-            return target
+            return completed_upload_folder(folder) / name
         except BaseException:
             shutil.rmtree(folder, ignore_errors=True)
             raise

@@ -27,6 +27,7 @@ import viser.uplot
 
 from app.canvas import target_colour
 from app.views import SignalHistory
+from app.viser_private import send_uplot_data
 
 ABERRANT_COLOUR = "#e03131"
 CURSOR_COLOUR = "#495057"
@@ -155,12 +156,9 @@ def chart_data(
 
 def send_data(handle: viser.GuiUplotHandle, data: Chart) -> None:
     """Assign a chart's data keeping its nulls. Assigning `handle.data` casts every series to
-    a float64 array, null becoming NaN again, so the data is queued past that cast (viser 1.1:
-    the handle's props and its update message, as the assignment itself does)."""
-    if handle._impl.removed:
-        raise RuntimeError("the chart was removed")
-    handle._impl.props.data = data
-    handle._queue_update("data", data)
+    a float64 array, null becoming NaN again, so the data is sent past that cast
+    (app/viser_private.py)."""
+    send_uplot_data(handle, data)
 
 
 def _css(colour: tuple[int, int, int]) -> str:

@@ -10,6 +10,8 @@ from __future__ import annotations
 
 from pathlib import Path
 
+from app.browser_text import readable
+from app.paths import check_writable
 from autotrack.errors import InputError
 from autotrack.localization.scene import load_scene
 from autotrack.sessions import open_session
@@ -21,7 +23,7 @@ class SessionCommands:
 
     def refresh_sessions(self) -> None:
         """List the recorded sessions this tab's browser may see (app/owners.py), newest first."""
-        self.session_choices = {path.name: path for path in self.space.session_files()}
+        self.session_choices = {readable(path.name): path for path in self.space.session_files()}
 
     def reopen(self, name: str) -> None:
         """Reopen the session listed as `name` and continue it into a new session file, with
@@ -32,6 +34,7 @@ class SessionCommands:
         writer = self.recordings.writer_of(path)
         if writer not in (None, self.tab_id):
             raise InputError(f"{path.name} is being recorded by another tab; reopen it later")
+        check_writable(self.space.sessions_dir, "sessions")  # the continuation's new file
         if writer == self.tab_id:  # this tab's own recording: finished first, then reopened
             self.close_run()
         session = open_session(path)

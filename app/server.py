@@ -8,26 +8,33 @@ playback, GUI and 3-D scene) belongs to one tab (app/controller.py holds it).
 
 from __future__ import annotations
 
+import logging
 import threading
 
 import viser
 
-from app.access import AccessGuard, guarded_handshakes
+from app.access import AccessGuard
 from app.channel import ClientChannel, ViserClientChannel
 from app.config import AppConfig
-from app.memory import release_freed_memory
+from app.memory import limit_malloc_arenas, release_freed_memory
 from app.owners import BrowserSpace, browser_tag
 from app.recordings import RecordingRegistry
 from app.tab import Tab
 from app.uploads import UploadReceiver
+from app.viser_private import check_viser_version, guard_handshakes, handshake_headers
+from autotrack.errors import AutoTrackError
 from autotrack.tracker.parallel.target_process import WorkerPool
 from autotrack.tracker.parallel.warmup import warm_up
+
+LOG = logging.getLogger(__name__)
 
 
 class StudioServer:
     """A running app: the viser server plus one `Tab` per connected browser tab."""
 
     def __init__(self, config: AppConfig) -> None:
+        check_viser_version()
+        limit_malloc_arenas()  # before viser's and the tabs' threads start
         self.config = config
         config.sessions_dir.mkdir(parents=True, exist_ok=True)
         self.roots = config.browsable_roots()
@@ -39,7 +46,7 @@ class StudioServer:
         self.tabs: dict[int, Tab] = {}
         """Open tabs by id (guarded by a lock: tabs connect and leave on viser's threads)."""
         self.access = AccessGuard(config.token, config.host)
-        with guarded_handshakes(self.access):
+        with guard_handshakes(self.access.wrap):
             self.viser = viser.ViserServer(
                 host=config.host, port=config.port, label="AutoTrack Studio", verbose=False
             )
@@ -83,13 +90,10 @@ class StudioServer:
     def _browser_of(self, client_id: int) -> str | None:
         """The browser cookie of a client's websocket handshake (None if it sent none).
 
-        viser does not pass the handshake on, so it is read from viser's table of live
-        connections; if viser changes that, every tab gets a space of its own (nothing is
-        shared by mistake)."""
-        infra = getattr(self.viser, "_websock_server", None)
-        connection = getattr(infra, "_live_connections", {}).get(client_id)
-        request = getattr(connection, "request", None)
-        return None if request is None else self.access.browser_id(request.headers)
+        viser does not pass the handshake on (app/viser_private.py reads it); a client without
+        one gets a space of its own (nothing is shared by mistake)."""
+        headers = handshake_headers(self.viser, client_id)
+        return None if headers is None else self.access.browser_id(headers)
 
     def open_tab(
         self,
@@ -123,7 +127,12 @@ class StudioServer:
             worker_pool=self.worker_pool,
         )
         self.uploads.attach(
-            gui, tab.panels.sequence.upload, tab_id, tab.receive_upload_file, tab.refuse_upload
+            gui,
+            tab.panels.sequence.upload,
+            tab_id,
+            tab.receive_upload_file,
+            tab.refuse_upload,
+            browser=space.tag,
         )
         with self._lock:
             self.tabs[tab_id] = tab
@@ -137,7 +146,7 @@ class StudioServer:
             tab = self.tabs.pop(tab_id, None)
         self.uploads.forget_tab(tab_id)
         if tab is not None:
-            tab.close()
+            _close(tab)
             del tab
             release_freed_memory()
 
@@ -147,6 +156,15 @@ class StudioServer:
             tabs = list(self.tabs.values())
             self.tabs.clear()
         for tab in tabs:
-            tab.close()
+            _close(tab)
         self.worker_pool.close()
         self.viser.stop()
+
+
+def _close(tab: Tab) -> None:
+    """Close a tab; a failure to finish its files (a full disk) is logged in one line, the tab
+    is let go all the same (its recording released, app/controller.py close_run)."""
+    try:
+        tab.close()
+    except (OSError, AutoTrackError) as error:
+        LOG.warning("tab %s closed with an error: %s", tab.tab_id, error)

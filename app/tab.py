@@ -391,10 +391,12 @@ class Tab:
 
     def close(self) -> None:
         """Stop the threads and finish the recording (the tab's browser went away)."""
-        self.worker.close()
-        self.live.halt()
-        self.display.close()
-        self.controller.close()
+        try:
+            self.worker.close()
+            self.live.halt()
+            self.display.close()
+        finally:
+            self.controller.close()  # whatever the rest raised: the recording is let go
 
 
 def _target(choice: str) -> str | None:

@@ -17,18 +17,29 @@ import contextlib
 import os
 import shutil
 import threading
+import time
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import BinaryIO
 
 import viser
-from viser._messages import FileTransferPart, FileTransferPartAck, FileTransferStartUpload
 
-from app.paths import VIDEO_SUFFIXES, UploadLimits, folder_bytes, safe_file_name
-
-FREE_SPACE_RESERVE = 256 * 1024**2
-"""Disk space an upload must leave free (bytes), so a full disk never stops the recordings."""
+from app.paths import (
+    VIDEO_SUFFIXES,
+    UploadLimits,
+    folder_bytes,
+    remove_partial_uploads,
+    safe_file_name,
+)
+from app.viser_private import (
+    UploadHandlers,
+    UploadPart,
+    UploadStart,
+    acknowledge_upload,
+    take_over_uploads,
+    upload_button_id,
+)
 
 
 @dataclass
@@ -36,14 +47,29 @@ class _Transfer:
     """One upload in progress."""
 
     tab_id: int
+    browser: str | None
     button: str
     name: str
     declared: int
     part_count: int
     path: Path
     sink: BinaryIO
+    last_seen: float
+    """When its last message arrived (the receiver's clock)."""
     received: int = 0
     next_part: int = 0
+
+
+STALLED = "the upload stopped arriving and was ended; upload the file again"
+"""Told to a tab whose upload sent nothing for `UploadLimits.idle_seconds`."""
+
+
+@dataclass
+class _Interface:
+    """Our upload handlers on one GUI's websocket, and the tabs whose buttons use it."""
+
+    handlers: UploadHandlers
+    tab_ids: set[int] = field(default_factory=set)
 
 
 @dataclass(frozen=True)
@@ -53,21 +79,33 @@ class _Button:
     tab_id: int
     deliver: Callable[[str, Path], None]
     refuse: Callable[[str], None]
+    browser: str | None = None
+    """The browser of its tab (None: a space of its own)."""
 
 
 class UploadReceiver:
     """Receives the uploads of every tab's upload button into `incoming`."""
 
-    def __init__(self, incoming: Path, upload_dir: Path, limits: UploadLimits) -> None:
+    def __init__(
+        self,
+        incoming: Path,
+        upload_dir: Path,
+        limits: UploadLimits,
+        clock: Callable[[], float] = time.monotonic,
+    ) -> None:
         self.incoming = incoming
         self.upload_dir = upload_dir
         self.limits = limits
+        self.clock = clock
+        """Seconds, for the idle timeout (time.monotonic; tests pass their own)."""
         self._lock = threading.Lock()
         self._buttons: dict[str, _Button] = {}
         self._transfers: dict[str, _Transfer] = {}
-        self._interfaces: dict[int, object] = {}
+        self._interfaces: dict[int, _Interface] = {}
+        """The GUIs whose uploads we receive, by id (a client's, or the server's in tests)."""
         shutil.rmtree(incoming, ignore_errors=True)  # what a killed server left behind
         incoming.mkdir(parents=True, exist_ok=True)
+        remove_partial_uploads(upload_dir)
 
     def attach(
         self,
@@ -76,25 +114,18 @@ class UploadReceiver:
         tab_id: int,
         deliver: Callable[[str, Path], None],
         refuse: Callable[[str], None],
+        browser: str | None = None,
     ) -> None:
         """Receive `button`'s uploads: `deliver(name, path)` gets each complete file (it owns
-        the file from then on), `refuse(message)` each refusal."""
-        interface = gui._websock_interface  # noqa: SLF001 (viser offers no public hook)
-        handlers = interface._incoming_handlers  # noqa: SLF001
+        the file from then on), `refuse(message)` each refusal. Tabs of one `browser` have one
+        upload in flight between them."""
         with self._lock:
-            self._buttons[button._impl.uuid] = _Button(tab_id, deliver, refuse)  # noqa: SLF001
-            if id(interface) in self._interfaces:
-                return
-            self._interfaces[id(interface)] = interface
-            for message_type, ours in (
-                (FileTransferStartUpload, self._start),
-                (FileTransferPart, self._part),
-            ):
-                viser_handler = getattr(gui, f"_handle_{_HANDLERS[message_type]}")
-                if viser_handler not in handlers.get(message_type, []):
-                    raise RuntimeError("viser's upload handlers are not where this app expects")
-                interface.unregister_handler(message_type, viser_handler)
-                interface.register_handler(message_type, _with_interface(ours, interface))
+            self._buttons[upload_button_id(button)] = _Button(tab_id, deliver, refuse, browser)
+            interface = self._interfaces.get(id(gui))
+            if interface is None:
+                handlers = take_over_uploads(gui, self._start, self._part)
+                interface = self._interfaces[id(gui)] = _Interface(handlers)
+            interface.tab_ids.add(tab_id)
 
     def forget_tab(self, tab_id: int) -> None:
         """A tab closed: end its transfers (deleting their files) and forget its buttons."""
@@ -104,13 +135,38 @@ class UploadReceiver:
             ended = [key for key, transfer in self._transfers.items() if transfer.tab_id == tab_id]
             for key in ended:
                 _discard(self._transfers.pop(key))
+            released = []
+            for key, interface in list(self._interfaces.items()):
+                interface.tab_ids.discard(tab_id)
+                if not interface.tab_ids:
+                    released.append(self._interfaces.pop(key).handlers)
+        for handlers in released:
+            handlers.release()
 
     def in_flight(self) -> int:
         """Transfers in progress."""
         with self._lock:
             return len(self._transfers)
 
-    def _problem(self, tab_id: int, name: str, declared: int) -> str | None:
+    def _end_stalled(self) -> list[_Button]:
+        """End the transfers that sent nothing for `idle_seconds` (called under the lock):
+        their files are deleted and their space counts no more; their buttons, to tell."""
+        now = self.clock()
+        stalled = [
+            key
+            for key, transfer in self._transfers.items()
+            if now - transfer.last_seen > self.limits.idle_seconds
+        ]
+        told = []
+        for key in stalled:
+            transfer = self._transfers.pop(key)
+            _discard(transfer)
+            button = self._buttons.get(transfer.button)
+            if button is not None:
+                told.append(button)
+        return told
+
+    def _problem(self, button: _Button, name: str, declared: int) -> str | None:
         """Why a transfer must be refused at its start (called under the lock)."""
         limits = self.limits
         suffix = Path(safe_file_name(name)).suffix.lower()
@@ -123,24 +179,30 @@ class UploadReceiver:
                 f"the upload is {declared / 1e6:.0f} MB; the limit is "
                 f"{limits.max_upload_bytes / 1e6:.0f} MB"
             )
-        if any(transfer.tab_id == tab_id for transfer in self._transfers.values()):
-            return "an upload from this tab is still arriving; wait for it to finish"
+        if any(
+            transfer.tab_id == button.tab_id
+            or (button.browser is not None and transfer.browser == button.browser)
+            for transfer in self._transfers.values()
+        ):
+            return "an upload from this browser is still arriving; wait for it to finish"
         pending = sum(transfer.declared for transfer in self._transfers.values())
         if folder_bytes(self.upload_dir) + pending + declared > limits.max_upload_dir_bytes:
             return (
                 f"the uploads folder would exceed its quota of "
                 f"{limits.max_upload_dir_bytes / 1e9:.1f} GB; ask the server's owner to clear it"
             )
-        if shutil.disk_usage(self.incoming).free < pending + declared + FREE_SPACE_RESERVE:
+        free = shutil.disk_usage(self.incoming).free
+        if free < pending + declared + limits.free_space_reserve:
             return "the server's disk has no room for this upload"
         return None
 
-    def _start(self, interface, client_id: int, message: FileTransferStartUpload) -> None:  # noqa: ANN001
+    def _start(self, handlers: UploadHandlers, client_id: int, message: UploadStart) -> None:
         with self._lock:
             button = self._buttons.get(message.source_component_uuid)
             if button is None or button.tab_id != client_id:
                 return
-            problem = self._problem(button.tab_id, message.filename, message.size_bytes)
+            stalled = self._end_stalled()
+            problem = self._problem(button, message.filename, message.size_bytes)
             if problem is None:
                 path = self.incoming / f"{os.getpid()}-{safe_file_name(message.transfer_uuid)}.part"
                 try:
@@ -150,18 +212,22 @@ class UploadReceiver:
                 else:
                     self._transfers[message.transfer_uuid] = _Transfer(
                         button.tab_id,
+                        button.browser,
                         message.source_component_uuid,
                         message.filename,
                         message.size_bytes,
                         message.part_count,
                         path,
                         sink,
+                        last_seen=self.clock(),
                     )
+        for idle in stalled:
+            idle.refuse(STALLED)
         if problem is not None:
-            _ack(interface, message.source_component_uuid, message.transfer_uuid, 1, 1)
+            acknowledge_upload(handlers, message.source_component_uuid, message.transfer_uuid, 1, 1)
             button.refuse(problem)
 
-    def _part(self, interface, client_id: int, message: FileTransferPart) -> None:  # noqa: ANN001
+    def _part(self, handlers: UploadHandlers, client_id: int, message: UploadPart) -> None:
         with self._lock:
             transfer = self._transfers.get(message.transfer_uuid)
             if transfer is None or transfer.tab_id != client_id:
@@ -185,6 +251,7 @@ class UploadReceiver:
             if problem is None:
                 transfer.received += size
                 transfer.next_part += 1
+                transfer.last_seen = self.clock()
                 done = transfer.next_part == transfer.part_count
                 if done and transfer.received != transfer.declared:
                     problem = "the upload is smaller than it declared; refused"
@@ -194,8 +261,8 @@ class UploadReceiver:
                     _discard(transfer)
                 else:
                     transfer.sink.close()
-        _ack(
-            interface, transfer.button, message.transfer_uuid, transfer.received, transfer.declared
+        acknowledge_upload(
+            handlers, transfer.button, message.transfer_uuid, transfer.received, transfer.declared
         )
         if button is None:
             if problem is None and done:
@@ -204,26 +271,6 @@ class UploadReceiver:
             button.refuse(problem)
         elif done:
             button.deliver(transfer.name, transfer.path)
-
-
-_HANDLERS = {FileTransferStartUpload: "file_transfer_start", FileTransferPart: "file_transfer_part"}
-
-
-def _with_interface(handler, interface):  # noqa: ANN001, ANN202
-    """`handler` with the websocket interface its acknowledgements go to."""
-    return lambda client_id, message: handler(interface, client_id, message)
-
-
-def _ack(interface, button: str, transfer: str, received: int, total: int) -> None:  # noqa: ANN001
-    """Tell the browser's upload button how far the transfer is (it shows progress)."""
-    interface.queue_message(
-        FileTransferPartAck(
-            source_component_uuid=button,
-            transfer_uuid=transfer,
-            transferred_bytes=received,
-            total_bytes=total,
-        )
-    )
 
 
 def _discard(transfer: _Transfer) -> None:

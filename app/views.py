@@ -11,6 +11,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
+from app.browser_text import markdown_literal
 from app.canvas import TargetDrawing, target_colour
 from app.groundtruth import TruthView
 from autotrack.errors import SessionError
@@ -246,7 +247,7 @@ def status_text(
 ) -> str:
     """The status line: sequence, frame, tracking progress, rates, pose, then the message."""
     parts = [
-        f"**{run.frames.name}** · frame {frame_index + 1} / {run.frame_count}",
+        f"**{markdown_literal(run.frames.name)}** · frame {frame_index + 1} / {run.frame_count}",
         f"tracked to {run.tracked_until + 1}" if run.targets else "no targets",
     ]
     if rates:
@@ -254,7 +255,7 @@ def status_text(
     if pose is not None:
         parts.append(pose_text(pose))
     text = " · ".join(parts)
-    return f"{text}\n\n{message}" if message else text
+    return f"{text}\n\n{markdown_literal(message)}" if message else text
 
 
 def pose_text(pose: PoseEstimate) -> str:

@@ -14,6 +14,7 @@ import websockets.sync.client as ws_client
 from websockets.exceptions import InvalidStatus
 
 from app.config import AppConfig
+from tests.browser_socket import SocketBrowser
 
 DEMO = Path(__file__).resolve().parents[1] / "static" / "demo"
 
@@ -135,8 +136,6 @@ def test_unbindable_host_exits_with_one_line(tmp_path: Path) -> None:
 def test_the_page_names_the_browser_and_its_websocket_carries_the_name(studio) -> None:
     """The page's answer sets a random browser cookie; the server reads it back from the
     websocket handshake of that browser's tabs (whose sessions and uploads are whose)."""
-    import time
-
     cookies = [
         value.split(";")[0] for key, value in _all_headers(studio.url) if key == "Set-Cookie"
     ]
@@ -151,23 +150,16 @@ def test_the_page_names_the_browser_and_its_websocket_carries_the_name(studio) -
     )
     assert not any("autotrack_browser" in value for key, value in again if key == "Set-Cookie")
 
-    live = studio.viser._websock_server._live_connections
-    seen = set(live)
+    def browser_of_new_tab(browser_cookie: str | None) -> str | None:
+        """The browser the server reads from the handshake of a new tab's websocket."""
+        known = set(studio.tabs)
+        with SocketBrowser(studio.port, token=studio.config.token, browser=browser_cookie) as tab:
+            tab.wait_for(lambda: set(studio.tabs) - known)
+            (tab_id,) = set(studio.tabs) - known
+            return studio._browser_of(tab_id)
 
-    def new_client() -> int:
-        deadline = time.monotonic() + 30
-        while not set(live) - seen:
-            assert time.monotonic() < deadline
-            time.sleep(0.02)
-        (client_id,) = set(live) - seen
-        seen.add(client_id)
-        return client_id
-
-    cookie = f"{token_cookie}; autotrack_browser_{studio.port}={browser}"
-    with _websocket(studio, token=None, origin=None, cookie=cookie):
-        assert studio._browser_of(new_client()) == browser
-    with _websocket(studio, token=studio.config.token, origin=None):  # no browser cookie
-        assert studio._browser_of(new_client()) is None
+    assert browser_of_new_tab(browser) == browser
+    assert browser_of_new_tab(None) is None  # no browser cookie
 
 
 def _all_headers(url: str, headers: dict[str, str] | None = None) -> list[tuple[str, str]]:

@@ -3,7 +3,6 @@ before anything is unpacked or decoded, nothing left behind (issue 17)."""
 
 from __future__ import annotations
 
-import asyncio
 import io
 import struct
 import zipfile
@@ -11,10 +10,10 @@ import zlib
 from pathlib import Path
 
 import pytest
-from viser._messages import FileTransferPart, FileTransferStartUpload
 
 from app.config import AppConfig
 from app.paths import UploadLimits, store_upload
+from app.viser_private import UploadPart, UploadStart, deliver_as_client, upload_button_id
 from autotrack.errors import InputError
 from tests.test_app import DEMO, RecordingChannel
 
@@ -60,18 +59,16 @@ class Browser:
         self.channel = RecordingChannel()
         self.tab = studio.open_tab(self.channel, studio.viser.gui, studio.viser.scene, tab_id=1)
         assert self.tab.wait_idle()
-        self.button = self.tab.panels.sequence.upload._impl.uuid
+        self.button = upload_button_id(self.tab.panels.sequence.upload)
 
     def send(self, message) -> None:
-        server = self.studio.viser._websock_server
-        dispatch = server._handle_incoming_message(1, message)
-        asyncio.run_coroutine_threadsafe(dispatch, server._background_event_loop).result()
+        deliver_as_client(self.studio.viser, 1, message)
 
     def start(self, name: str, size: int, transfer: str = "t1") -> None:
-        self.send(FileTransferStartUpload(self.button, transfer, name, "", -(-size // PART), size))
+        self.send(UploadStart(self.button, transfer, name, "", -(-size // PART), size))
 
     def part(self, index: int, content: bytes, transfer: str = "t1") -> None:
-        self.send(FileTransferPart(self.button, transfer, index, content))
+        self.send(UploadPart(self.button, transfer, index, content))
 
 
 def _incoming(studio) -> list[Path]:
