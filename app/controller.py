@@ -107,6 +107,9 @@ class TabController(SessionCommands):
         """The target started from the ground truth (scored against it)."""
         self.play_seconds = np.zeros(0)
         """Per frame: seconds from the previous played frame to this one (NaN: not played)."""
+        self.file_run = False
+        """Whether the run is on a sequence it can be opened again on (not a live source or a
+        live recording looked through)."""
         self._played_at: float | None = None
 
     # -- reading the state --------------------------------------------------------------------
@@ -171,10 +174,69 @@ class TabController(SessionCommands):
         return path
 
     def choose_preset(self, name: str) -> None:
-        """Use tracker preset `name` for the sequences opened from now on."""
+        """Use tracker preset `name` from the next target on: a run without targets is made
+        again with it at once; a run whose targets track with another preset says so, and
+        `restart_with_preset` opens the sequence again with it."""
         if name not in PRESETS:
             raise InputError(f"unknown tracker preset {name!r}; choose one of {sorted(PRESETS)}")
         self.preset_name = name
+        if self.run is None or self.run.params.name == name:
+            self.message = f"Tracker: {name}."
+        elif self._follow_preset():
+            self.message = f"Tracker: {name}, for the targets drawn from now on."
+        else:
+            self.message = self.preset_note()
+
+    @property
+    def preset_pending(self) -> bool:
+        """Whether the chosen preset differs from the one the open run's targets track with."""
+        return self.run is not None and self.run.params.name != self.preset_name
+
+    def preset_note(self) -> str:
+        """What the page says while the chosen preset waits for a restart ('' when none)."""
+        if not self.preset_pending:
+            return ""
+        used, chosen = self.require_run().params.name, self.preset_name
+        if not self.file_run:
+            return (
+                f"This run tracks with {used}: {chosen} applies to the next sequence opened "
+                "(a live source's run cannot be restarted)."
+            )
+        return (
+            f"This run's targets track with {used}: {chosen} applies only after "
+            f"*Sequence → Restart with {chosen}* (opens this sequence again on this frame; "
+            "the session recorded so far is kept)."
+        )
+
+    def _follow_preset(self) -> bool:
+        """Before the run's first target: make the run again with the chosen preset if it has
+        another (the session then records the parameters the targets really use). True when
+        the run uses the chosen preset afterwards."""
+        run = self.require_run()
+        if run.params.name == self.preset_name:
+            return True
+        if run.targets or not self.file_run or self.sequence_path is None:
+            return False
+        cursor, message = self.cursor, self.message
+        self.open(self.sequence_path, self.scene_path, scene_given=True)
+        self.cursor, self.message = min(cursor, self.require_run().frame_count - 1), message
+        return True
+
+    def restart_with_preset(self) -> None:
+        """Open the sequence again with the chosen preset, on the current frame (the targets
+        are dropped; the session recorded so far is finished and kept)."""
+        run = self.require_run()
+        if not self.preset_pending:
+            raise InputError(f"this run already tracks with {run.params.name}")
+        if not self.file_run or self.sequence_path is None:
+            raise InputError(self.preset_note())
+        cursor = self.cursor
+        self.open(self.sequence_path, self.scene_path, scene_given=True)
+        self.cursor = min(cursor, self.require_run().frame_count - 1)
+        self.message = (
+            f"Restarted with {self.preset_name} on frame {self.cursor + 1}: draw the targets "
+            "again (or Start from ground truth)."
+        )
 
     def open_upload(self, file_name: str, content: bytes | Path) -> None:
         """Store an uploaded video or zip of images (bytes or a received file) safely, then
@@ -196,7 +258,8 @@ class TabController(SessionCommands):
         `scene_given`) with the chosen preset, closing the current run and its recording."""
         frames, scene, scene_path = self._load(path, scene_path, scene_given=scene_given)
         run = self._new_run(frames, scene, self._recording(path, scene_path))
-        self.install_run(run, path, scene_path)
+        self.install_run(run, path, scene_path, preset_name=self.preset_name)
+        self.file_run = True
 
     def _new_run(
         self,
@@ -245,13 +308,17 @@ class TabController(SessionCommands):
         """A new session file in the sessions folder, created at the first box."""
         return Recording(source=str(path), directory=self.space.sessions_dir, scene_path=scene_path)
 
-    def install_run(self, run: Pipeline, path: Path, scene_path: Path | None) -> None:
-        """Make `run` (on the sequence `path`) this tab's run, replacing the current one."""
+    def install_run(
+        self, run: Pipeline, path: Path, scene_path: Path | None, preset_name: str | None = None
+    ) -> None:
+        """Make `run` (on the sequence `path`) this tab's run, replacing the current one; the
+        Tracker choice shows `preset_name`, by default the run's own (a reopened session's)."""
         self.close_run()
         self.run = run
+        self.file_run = False  # open() and reopen() say when the run can be opened again
         self.ground_truth = ground_truth_positions(scene_path)
         self.sequence_path, self.scene_path = path, scene_path
-        self.preset_name = run.params.name  # a reopened session's own preset
+        self.preset_name = preset_name or run.params.name
         boxes = (path if path.is_dir() else path.parent) / "boxes.json"
         self.boxes_path = boxes if boxes.is_file() and run.scene is not None else None
         self.cursor, self.selected, self.ties = 0, None, LandmarkTies()
@@ -292,9 +359,11 @@ class TabController(SessionCommands):
         box redrawn (a correction when it was tracked there; it re-tracks from here). A new box
         on top of a target's box corrects that target instead. With a scene, new targets are
         tied to landmarks by the correspondence search once four boxes are on the frame."""
-        run = self.require_run()
         self.stop_playing()
         target_id = self.selected or overlapped_target(self.targets(), self.cursor, box)
+        if target_id is None:
+            self._follow_preset()
+        run = self.require_run()
         if target_id is None:
             if len(run.targets) >= self.config.max_targets:
                 raise InputError(
@@ -302,7 +371,7 @@ class TabController(SessionCommands):
                     "'Drag draws' to redraw its box, or delete one first"
                 )
             target_id = run.add_target(self.cursor, box, None)
-            self.message = f"{target_id} drawn at frame {self.cursor + 1}."
+            self.message = f"{target_id} drawn at frame {self.cursor + 1}. {self.preset_note()}"
             self._search_landmarks()
         else:
             corrected = self.cursor in run.targets[target_id].results
@@ -321,10 +390,12 @@ class TabController(SessionCommands):
 
     def start_from_truth(self) -> None:
         """Start (or restart) the ground-truth target from the current frame's ground-truth
-        box; its live scores are computed against the ground truth."""
-        run = self.require_run()
+        box; its live scores are computed against the ground truth. The first target of a
+        run takes the chosen tracker preset (see choose_preset)."""
         if self.truth is None:
             raise InputError("this sequence has no groundtruth_rect.txt")
+        self._follow_preset()
+        run = self.require_run()
         row = self.truth[self.cursor]
         if not (np.isfinite(row).all() and row[2] > 0 and row[3] > 0):
             raise InputError(f"the ground truth has no box on frame {self.cursor + 1}")
@@ -338,8 +409,8 @@ class TabController(SessionCommands):
             self.truth_target = run.add_target(self.cursor, box, None)
         self.message = (
             f"{self.truth_target} started from the ground truth at frame {self.cursor + 1}; "
-            "its scores grow as it tracks (Debugging → Ground truth)."
-        )
+            f"its scores grow as it tracks (Debugging → Ground truth). {self.preset_note()}"
+        ).strip()
         self.claim_recording()
 
     def scored_target(self) -> TrackedTarget | None:
@@ -380,9 +451,11 @@ class TabController(SessionCommands):
     def load_boxes_json(self) -> None:
         """Place the boxes of the sequence's boxes.json on frame 1, one target per landmark
         (a list of boxes is assigned to landmarks by the correspondence search)."""
+        self.boxes_json_boxes("this sequence has no boxes.json")  # refused before reopening
+        self.stop_playing()
+        self._follow_preset()
         run = self.require_run()
         boxes = self.boxes_json_boxes("this sequence has no boxes.json")
-        self.stop_playing()
         self.cursor = 0
         run.add_targets(0, boxes)
         self.message = f"Loaded {len(boxes)} boxes from boxes.json on frame 1."

@@ -86,6 +86,8 @@ class SequencePanel:
     scene: viser.GuiTextHandle
     use_scene: viser.GuiButtonHandle
     preset: viser.GuiDropdownHandle
+    restart: viser.GuiButtonHandle
+    """Restart with the chosen preset (shown while the run's targets track with another)."""
     upload: viser.GuiUploadButtonHandle
 
 
@@ -102,6 +104,7 @@ def _sequence_panel(gui: viser.GuiApi, config: AppConfig) -> SequencePanel:
             preset=gui.add_dropdown(
                 "Tracker", options=tuple(PRESETS), initial_value=config.tracker_preset
             ),
+            restart=gui.add_button("Restart with the chosen tracker", visible=False),
             upload=gui.add_upload_button(
                 "Upload video or zip of images", mime_type="video/*,.zip,application/zip"
             ),
@@ -365,6 +368,7 @@ def show_state(panels: Panels, controller: TabController) -> None:
     run = controller.run
     sequence = panels.sequence
     quiet.set_options(sequence.dropdown, tuple(controller.sequence_choices) or (NO_CHOICE,))
+    show_preset(panels, controller)
     show_targets(panels, controller)
     show_frame(panels, controller)
     show_playing(panels, controller.playing)
@@ -375,6 +379,19 @@ def show_state(panels: Panels, controller: TabController) -> None:
     quiet.set(session.recording, "content", recording)
     if run is None:
         quiet.set(panels.status, "content", controller.message)
+
+
+def show_preset(panels: Panels, controller: TabController) -> None:
+    """The Tracker choice as the controller holds it, and *Restart with ...* while the run's
+    targets track with another preset."""
+    quiet, sequence = panels.quiet, panels.sequence
+    if sequence.preset.value != controller.preset_name:
+        quiet.set(sequence.preset, "value", controller.preset_name)
+    pending = controller.preset_pending and controller.file_run
+    quiet.set(sequence.restart, "visible", pending)
+    label = f"Restart with {controller.preset_name}"
+    if pending and sequence.restart.label != label:
+        quiet.set(sequence.restart, "label", label)
 
 
 def show_opened(panels: Panels, controller: TabController) -> None:

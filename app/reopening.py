@@ -42,6 +42,7 @@ class SessionCommands:
         frames, scene, scene_path = self._load(source, scene_path, scene_given=True)
         run = self._new_run(frames, scene, self._recording(source, scene_path), session)
         self.install_run(run, source, scene_path)
+        self.file_run = True
         self.cursor = run.resume_frame
         self.claim_recording()
         note = " (the file was cut short)" if session.truncated else ""

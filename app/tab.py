@@ -130,6 +130,7 @@ class Tab:
         sequence.preset.on_update(
             edit(lambda: submit(controller.choose_preset, sequence.preset.value))
         )
+        sequence.restart.on_click(lambda _: submit(controller.restart_with_preset))
         sequence.upload.on_upload(
             lambda _: self.receive_upload(sequence.upload.value.name, sequence.upload.value.content)
         )
