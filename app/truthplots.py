@@ -11,6 +11,7 @@ import viser.uplot
 from app.groundtruth import TruthView
 from app.plots import (
     CHART_PADDING,
+    EMPTY_SCALES,
     chart_data,
     cursor_series,
     line_series,
@@ -57,6 +58,7 @@ class TruthPlots:
                 title="Centre error (px)",
                 aspect=2.0,
                 padding=CHART_PADDING,
+                scales=EMPTY_SCALES,
             )
             self.iou = gui.add_uplot(
                 data=(empty, empty, empty),
@@ -64,6 +66,7 @@ class TruthPlots:
                 title="Overlap (IoU)",
                 aspect=2.0,
                 padding=CHART_PADDING,
+                scales=EMPTY_SCALES,
             )
         self._scales: tuple | None = None
         self.last_text = ""

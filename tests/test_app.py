@@ -323,10 +323,10 @@ def test_the_cursor_line_stands_at_the_current_frame() -> None:
     x, values, line = with_cursor(5, [np.arange(5, dtype=float) * 10], 2, (-1.0, 7.0))
     assert np.all(np.diff(x) > 0) and len(x) == 5 + len(CURSOR_OFFSETS)
     at = np.flatnonzero(np.isfinite(line))
-    np.testing.assert_allclose(x[at], 2 + np.array(CURSOR_OFFSETS))
+    np.testing.assert_allclose(x[at], 3 + np.array(CURSOR_OFFSETS))  # frame 3, 1-based
     np.testing.assert_array_equal(line[at], [-1.0, 7.0])
     np.testing.assert_array_equal(values[at], [20.0, 20.0])  # the series do not break there
-    np.testing.assert_array_equal(values[np.isin(x, np.arange(5))], np.arange(5) * 10.0)
+    np.testing.assert_array_equal(values[np.isin(x, np.arange(1, 6))], np.arange(5) * 10.0)
 
 
 def test_the_cursor_line_stays_in_the_x_range_on_the_last_frame() -> None:
@@ -337,7 +337,8 @@ def test_the_cursor_line_stays_in_the_x_range_on_the_last_frame() -> None:
         low, high = x_range(last, count)
         drawn = [at for at, value in zip(x, line, strict=True) if value is not None]
         assert len(drawn) == len(CURSOR_OFFSETS) and low <= min(drawn) and max(drawn) <= high
-    assert x_range(10, 60) == (0.0, 50.0) and x_range(59, 60)[1] < 59.01
+    assert x_range(10, 60) == (1.0, 50.0) and x_range(59, 60)[1] < 60.01
+    assert x_range(49, 200) == (1.0, 100.0)  # frame 50 is shown with the cursor after it
 
 
 def test_local_variation_colour_scale_ignores_a_few_extreme_values() -> None:
@@ -1272,3 +1273,22 @@ def test_show_ground_truth_redraws_the_canvas_at_once(tmp_path: Path) -> None:
         assert not [note for note, error in channel.notes if error]
     finally:
         studio.stop()
+
+
+def test_the_tracker_choice_applies_or_offers_a_restart_with_it(studio) -> None:
+    tab, _ = _open_tab(studio)
+    sequence, restart = tab.panels.sequence, tab.panels.sequence.restart
+    _set(sequence.preset, "autotrack+")  # no target yet: the run takes it at once
+    assert tab.wait_idle()
+    assert tab.controller.run.params.name == "autotrack+" and not restart.visible
+    _drag(tab, _demo_boxes()["A"])
+    assert tab.controller.run.params.name == "autotrack+"
+    _set(sequence.preset, "strcf")  # T1 tracks with autotrack+: the page offers a restart
+    assert tab.wait_idle()
+    assert restart.visible and restart.label == "Restart with strcf"
+    assert tab.controller.run.params.name == "autotrack+"
+    assert "Restart with strcf" in tab.controller.message
+    _click(restart)
+    assert tab.wait_idle()
+    assert tab.controller.run.params.name == "strcf" and not restart.visible
+    assert sequence.preset.value == "strcf" and not tab.controller.run.targets
