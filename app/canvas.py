@@ -319,12 +319,12 @@ def draw_overlays(
     map_kind: str,
     max_width: int | None = None,
     map_opacity: float = 0.7,
-    truth_box: Box | None = None,
+    truth_boxes: Sequence[tuple[Box, str]] = (),
 ) -> np.ndarray:
     """The frame, scaled down to at most `max_width` pixels, with each target's box, label and
     response peak drawn, and its response map ('response') or local variation map
-    ('local_variation') blended over its search region, and `truth_box` (the ground truth) in
-    white. An aberrant frame gets a red outer box and the word ABERRANT. The input frame is not
+    ('local_variation') blended over its search region, and `truth_boxes` (the ground truth,
+    (box, label) each) in white. An aberrant frame gets a red outer box and the word ABERRANT. The input frame is not
     modified."""
     rgb = as_rgb(frame)
     scale = 1.0
@@ -340,8 +340,8 @@ def draw_overlays(
     line = max(1, round(canvas.shape[1] / 640))
     if map_kind in ("response", "local_variation", "local_variation_target"):
         _blend_maps(canvas, targets, map_kind, scale, map_opacity)
-    if truth_box is not None:
-        _truth_on(canvas, scaled(truth_box), line)
+    for truth_box, truth_label in truth_boxes:
+        _truth_on(canvas, scaled(truth_box), line, truth_label)
     for target in targets:
         x, y, w, h = scaled(target.box)
         top_left = (round(x), round(y))
@@ -414,12 +414,12 @@ def _blend_maps(
         _legend_on(canvas, legend)
 
 
-def _truth_on(canvas: np.ndarray, box: Box, line: int) -> None:
-    """The ground-truth box, white, labelled GT under it, in place."""
+def _truth_on(canvas: np.ndarray, box: Box, line: int, label: str = "GT") -> None:
+    """A ground-truth box, white, labelled (`GT`, `GT A`) under it, in place."""
     x, y, w, h = box
     cv2.rectangle(canvas, (round(x), round(y)), (round(x + w), round(y + h)), TRUTH, line)
     origin = (round(x), round(y + h) + 14 * line)
-    cv2.putText(canvas, "GT", origin, cv2.FONT_HERSHEY_SIMPLEX, 0.45 * line, TRUTH, line)
+    cv2.putText(canvas, label, origin, cv2.FONT_HERSHEY_SIMPLEX, 0.45 * line, TRUTH, line)
 
 
 def _legend_on(canvas: np.ndarray, limits: Limits) -> None:

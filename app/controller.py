@@ -19,7 +19,16 @@ import numpy as np
 from app import exports
 from app.boxes import Box, ground_truth_positions, overlapped_target
 from app.config import AppConfig
-from app.groundtruth import load_truth, truth_view
+from app.groundtruth import (
+    TruthPoses,
+    TruthView,
+    charted_view,
+    landmark_truth_views,
+    load_landmark_truth,
+    load_truth,
+    load_truth_poses,
+    truth_view,
+)
 from app.landmarks import LandmarkTies, search_message
 from app.owners import BrowserSpace
 from app.paths import display_name, find_sequences, resolve_user_path, store_upload
@@ -105,6 +114,10 @@ class TabController(SessionCommands):
         """The sequence's ground-truth boxes (0-based, one row per frame), if it has some."""
         self.truth_target: str | None = None
         """The target started from the ground truth (scored against it)."""
+        self.landmark_truth: dict[str, np.ndarray] = {}
+        """Landmark id -> its ground-truth boxes (groundtruth/<landmark>.txt, e.g. the demo's)."""
+        self.truth_poses: TruthPoses | None = None
+        """The scene's ground-truth camera poses per frame (poses_gt.tum), if known."""
         self.play_seconds = np.zeros(0)
         """Per frame: seconds from the previous played frame to this one (NaN: not played)."""
         self.file_run = False
@@ -324,6 +337,9 @@ class TabController(SessionCommands):
         self.cursor, self.selected, self.ties = 0, None, LandmarkTies()
         self.play_seconds = np.full(run.frame_count, np.nan)
         self.truth = load_truth(path, run.frame_count)
+        landmarks = () if run.scene is None else run.scene.landmark_ids
+        self.landmark_truth = load_landmark_truth(path, run.frame_count, landmarks)
+        self.truth_poses = load_truth_poses(scene_path, run.frame_count, run.fps)
         self.truth_target = None
         self.sequences_opened += 1
         scene = run.scene
@@ -340,6 +356,7 @@ class TabController(SessionCommands):
         self.run.frames.close()
         finished = self.recording_path
         self.run, self.recording_path, self.boxes_path, self.truth = None, None, None, None
+        self.landmark_truth, self.truth_poses = {}, None
         if finished is not None:
             self.recordings.release(finished)
             self.refresh_sessions()  # the finished session is listed at once
@@ -391,9 +408,12 @@ class TabController(SessionCommands):
     def start_from_truth(self) -> None:
         """Start (or restart) the ground-truth target from the current frame's ground-truth
         box; its live scores are computed against the ground truth. The first target of a
-        run takes the chosen tracker preset (see choose_preset)."""
+        run takes the chosen tracker preset (see choose_preset). A sequence with per-landmark
+        ground truth (the demo's groundtruth/) starts a target per landmark instead."""
+        if self.truth is None and self.landmark_truth:
+            return self._start_from_landmark_truth()
         if self.truth is None:
-            raise InputError("this sequence has no groundtruth_rect.txt")
+            raise InputError("this sequence has no groundtruth_rect.txt or groundtruth/")
         self._follow_preset()
         run = self.require_run()
         row = self.truth[self.cursor]
@@ -412,6 +432,53 @@ class TabController(SessionCommands):
             f"its scores grow as it tracks (Debugging → Ground truth). {self.preset_note()}"
         ).strip()
         self.claim_recording()
+
+    def _start_from_landmark_truth(self) -> None:
+        """Every landmark's ground-truth box on the current frame: the target tied to it
+        restarts there, a landmark without one gets a new target."""
+        boxes = {}
+        for landmark_id, rows in self.landmark_truth.items():
+            row = rows[self.cursor]
+            if np.isfinite(row).all() and row[2] > 0 and row[3] > 0:
+                boxes[landmark_id] = (float(row[0]), float(row[1]), float(row[2]), float(row[3]))
+        if not boxes:
+            raise InputError(f"the ground truth has no box on frame {self.cursor + 1}")
+        self.stop_playing()
+        self._follow_preset()
+        run = self.require_run()
+        tied = {t.landmark_id: t.id for t in run.targets.values() if t.landmark_id is not None}
+        new = {lid: box for lid, box in boxes.items() if lid not in tied}
+        if len(run.targets) + len(new) > self.config.max_targets:
+            raise InputError(
+                f"{len(new)} more targets would pass the maximum ({self.config.max_targets}): "
+                "delete some first"
+            )
+        for landmark_id, box in boxes.items():
+            if landmark_id in tied:
+                run.place_box(tied[landmark_id], self.cursor, box)
+        if new:
+            run.add_targets(self.cursor, new)
+        self.message = (
+            f"{len(boxes)} targets started from the landmarks' ground truth at frame "
+            f"{self.cursor + 1}; their scores grow as they track (Debugging → Ground truth). "
+            f"{self.preset_note()}"
+        ).strip()
+        self.claim_recording()
+
+    @property
+    def has_truth(self) -> bool:
+        """Whether the sequence carries ground-truth boxes (one target's, or per landmark)."""
+        return self.truth is not None or bool(self.landmark_truth)
+
+    def truth_views(self) -> tuple[TruthView, ...]:
+        """The ground truth on the current frame and the scores of the targets against it:
+        the target started from groundtruth_rect.txt (else T1), or each landmark's target."""
+        run = self.run
+        if run is None:
+            return ()
+        if self.truth is not None:
+            return (truth_view(self.truth, self.cursor, self.scored_target()),)
+        return landmark_truth_views(self.landmark_truth, run.targets, self.cursor)
 
     def scored_target(self) -> TrackedTarget | None:
         """The target scored against the ground truth: the one started from it, else T1."""
@@ -548,10 +615,17 @@ class TabController(SessionCommands):
         """Everything the display shows for the current frame (None without a run)."""
         if self.run is None:
             return None
-        truth = self.truth
-        scored = None if truth is None else truth_view(truth, self.cursor, self.scored_target())
+        truths = self.truth_views()
+        charted = charted_view(truths, (self.selected, self.truth_target)) if truths else None
         return frame_view(
-            self.run, self.cursor, self.selected, self.message, self.play_seconds, scored
+            self.run,
+            self.cursor,
+            self.selected,
+            self.message,
+            self.play_seconds,
+            charted,
+            truths=truths,
+            truth_poses=self.truth_poses,
         )
 
     def close(self) -> None:

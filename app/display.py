@@ -27,6 +27,7 @@ from app.canvas import (
     thumbnail,
 )
 from app.channel import ClientChannel
+from app.groundtruth import pose_errors
 from app.panels import (
     CANVAS_3D,
     CANVAS_FRAME,
@@ -37,7 +38,7 @@ from app.panels import (
 )
 from app.plots import SignalPlots
 from app.truthplots import TruthPlots
-from app.view3d import SceneView
+from app.view3d import SceneView, view3d_legend
 from app.views import FrameView, smoothed_view
 
 GUI_FPS = 30.0
@@ -153,8 +154,10 @@ def picture(
     """The view's frame with boxes, labels, peaks, the chosen map and (`show_truth`) the
     ground-truth box drawn."""
     kind = MAP_KINDS.get(maps, "none")
-    truth = view.truth.box if show_truth and view.truth is not None else None
-    return draw_overlays(view.frame, list(view.drawings.values()), kind, max_width, truth_box=truth)
+    truths = [(t.box, t.label) for t in view.truths if t.box is not None] if show_truth else []
+    return draw_overlays(
+        view.frame, list(view.drawings.values()), kind, max_width, truth_boxes=truths
+    )
 
 
 class DisplayLoop:
@@ -346,7 +349,13 @@ class DisplayLoop:
         status = view.status + missing_map_note(view, MAP_KINDS.get(maps))
         self.panels.quiet.set(self.panels.status, "content", status)
         self.plots.update(view.history, view.frame_index)
-        self.truth_plots.update(view.truth, view.frame_index)
+        errors = None
+        if view.truth_poses is not None and view.pose_view is not None:
+            errors = pose_errors(view.truth_poses, view.pose_view.poses, view.pose_view.fps)
+        self.truth_plots.update(view.truth, view.frame_index, view.truths, errors)
+        legend = view3d_legend(view.truth_poses is not None, errors)
+        if self.panels.display.legend.content != legend:
+            self.panels.quiet.set(self.panels.display.legend, "content", legend)
         self.stats.plot_updates += 1
         pose_view = view.pose_view
         if pose_view is not None:

@@ -237,6 +237,8 @@ class DisplayPanel:
     canvas_fps: viser.GuiSliderHandle
     maps_folder: viser.GuiFolderHandle
     """Holds one image per target while `maps` is MAPS_PANELS (see app/display.py)."""
+    legend: viser.GuiMarkdownHandle
+    """The 3-D view's legend and the pose error against the ground truth (app/view3d.py)."""
 
 
 def _display_panel(
@@ -256,6 +258,7 @@ def _display_panel(
             options=(TRAJECTORY_RAW, TRAJECTORY_SMOOTHED),
             initial_value=TRAJECTORY_RAW,
         )
+        legend = gui.add_markdown("")
         canvas_fps = gui.add_slider(
             "Canvas frames/s cap",
             min=1,
@@ -268,7 +271,7 @@ def _display_panel(
             f"Choose *Display → Maps → {MAPS_PANELS}* to show each target's maps here."
         )
         folder = gui.add_folder("Maps per target", visible=False)
-    return DisplayPanel(canvas, maps, trajectory, canvas_fps, folder)
+    return DisplayPanel(canvas, maps, trajectory, canvas_fps, folder, legend)
 
 
 @dataclass
@@ -446,8 +449,8 @@ def show_targets(panels: Panels, controller: TabController) -> None:
     quiet.set(widgets.delete, "disabled", chosen is None)
     quiet.set(widgets.delete, "label", delete_label(chosen and chosen.id, bool(targets)))
     quiet.set(widgets.boxes_json, "visible", controller.boxes_path is not None)
-    quiet.set(widgets.show_truth, "visible", controller.truth is not None)
-    quiet.set(widgets.from_truth, "visible", controller.truth is not None)
+    quiet.set(widgets.show_truth, "visible", controller.has_truth)
+    quiet.set(widgets.from_truth, "visible", controller.has_truth)
     if chosen is not None and controller.cursor in chosen.results:
         quiet.set(widgets.box, "value", format_box(chosen.results[controller.cursor].box))
     quiet.set(widgets.table, "content", targets_table(controller))

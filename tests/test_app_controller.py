@@ -786,9 +786,19 @@ def test_start_from_ground_truth_scores_like_the_cli(tmp_path: Path, capsys) -> 
     assert truth.box == pytest.approx(tuple(read_boxes(sequence / "groundtruth_rect.txt")[-1]))
 
 
-def test_ground_truth_needs_a_box_on_the_frame(controller) -> None:
-    with pytest.raises(InputError, match="no groundtruth_rect.txt"):
-        controller.start_from_truth()  # the demo has none
+def test_ground_truth_needs_a_box_on_the_frame(tmp_path: Path) -> None:
+    plain = tmp_path / "plain"
+    shutil.copytree(DEMO / "img", plain / "img")  # the demo's frames without its ground truth
+    config = AppConfig(sequence=plain, sessions_dir=tmp_path / "sessions", demo_dir=DEMO)
+    config.sessions_dir.mkdir()
+    controller = TabController(config, (plain,), RecordingRegistry(), 1)
+    controller.open_initial()
+    try:
+        assert not controller.has_truth
+        with pytest.raises(InputError, match="no groundtruth_rect.txt or groundtruth/"):
+            controller.start_from_truth()
+    finally:
+        controller.close()
 
 
 def test_playing_a_cut_video_stops_at_its_last_frame(tmp_path: Path) -> None:
