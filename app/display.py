@@ -34,12 +34,14 @@ from app.panels import (
     MAP_KINDS,
     MAPS_PANELS,
     TRAJECTORY_SMOOTHED,
+    ZOOM_FOLLOW,
     Panels,
 )
 from app.plots import SignalPlots
 from app.truthplots import TruthPlots
 from app.view3d import SceneView, view3d_legend
 from app.views import FrameView, smoothed_view
+from app.zoom import CanvasMapping, ZoomWindow, canvas_mapping, zoom_window
 
 GUI_FPS = 30.0
 """Most video-panel updates per second (viser keeps only the latest anyway)."""
@@ -182,7 +184,12 @@ class DisplayLoop:
         self.map_panels = MapPanels(gui, panels.display.maps_folder)
         self.stats = DisplayStats()
         self.letterbox: Letterbox | None = None
-        """How the last canvas background placed the frame (maps rect-selects to pixels)."""
+        """How the last canvas background placed the frame's shown window."""
+        self.mapping: CanvasMapping | None = None
+        """How the last canvas background maps canvas fractions to frame pixels (zoomed)."""
+        self._mapped_frame: tuple[int, int] | None = None
+        self.zoom_centre: tuple[float, float] | None = None
+        """Where the zoomed canvas is centred (frame pixels; None: the frame's centre)."""
         self._lock = threading.Condition()
         self._view: FrameView | None = None
         self._version = 0
@@ -205,21 +212,36 @@ class DisplayLoop:
             self._canvas_dirty = self._canvas_dirty or canvas
             self._lock.notify_all()
 
-    def canvas_letterbox(self, frame_size: tuple[int, int]) -> Letterbox:
-        """How the canvas shows (or will show) a frame of `frame_size` (width, height)."""
-        letterbox = self.letterbox
-        if letterbox is None or (letterbox.frame_width, letterbox.frame_height) != frame_size:
+    def canvas_mapping(self, frame_size: tuple[int, int]) -> CanvasMapping:
+        """How the canvas maps (or will map) a drag to pixels of a frame of `frame_size`."""
+        mapping = self.mapping
+        if mapping is None or self._mapped_frame != frame_size:
             # The canvas still shows another sequence's frame: map as the next one will show.
-            letterbox = fit_letterbox(frame_size, self.channel.canvas_size() or DEFAULT_CANVAS_SIZE)
-        return letterbox
+            size = self.channel.canvas_size() or DEFAULT_CANVAS_SIZE
+            mapping = canvas_mapping(frame_size, size, self.zoom_window(frame_size))
+        return mapping
+
+    def zoom_window(self, frame_size: tuple[int, int], view: FrameView | None = None) -> ZoomWindow:
+        """The window of the frame the canvas shows: the Zoom slider's scale, centred on the
+        target chosen in Drag draws when *Zoom centre* follows it (and `view` has its box),
+        else where the user last clicked."""
+        display = self.panels.display
+        centre = self.zoom_centre
+        if view is not None and display.zoom_centre.value == ZOOM_FOLLOW:
+            chosen = [d for d in view.drawings.values() if d.selected]
+            if chosen:
+                x, y, w, h = chosen[0].box
+                centre = (x + w / 2.0, y + h / 2.0)
+        return zoom_window(frame_size, float(display.zoom.value), centre)
 
     def canvas_resized(self) -> None:
         """The browser's canvas changed: resend the background if its letterbox changed."""
         size = self.channel.canvas_size()
-        letterbox = self.letterbox
-        if letterbox is None or size is None:
+        mapping = self.mapping
+        if mapping is None or size is None:
             return
-        if fit_letterbox((letterbox.frame_width, letterbox.frame_height), size) != letterbox:
+        window = mapping.window
+        if fit_letterbox((window.width, window.height), size) != mapping.letterbox:
             self.wake(canvas=True)
 
     def close(self, timeout: float = 10.0) -> None:
@@ -320,16 +342,21 @@ class DisplayLoop:
     def _send_canvas(self, view: FrameView, maps: str) -> None:
         size = self.channel.canvas_size() or DEFAULT_CANVAS_SIZE
         height, width = view.frame.shape[:2]
-        letterbox = fit_letterbox((width, height), size)
-        # Drawn at full size and padded in frame pixels, then scaled as a whole: canvas
-        # fractions map to frame pixels exactly through `letterbox`.
+        mapping = canvas_mapping((width, height), size, self.zoom_window((width, height), view))
+        # Drawn at full size, cut to the zoom window and padded in its pixels, then scaled as
+        # a whole (never up: a zoomed window is sent at its own resolution): canvas fractions
+        # map to frame pixels exactly through `mapping`.
         image = letterbox_image(
-            picture(view, maps, None, self._show_truth()),
-            letterbox,
+            mapping.window.crop(picture(view, maps, None, self._show_truth())),
+            mapping.letterbox,
             min(CANVAS_MAX_WIDTH, max(size[0], 320)),
         )
         self.scene_api.set_background_image(image, format="jpeg", jpeg_quality=80)
-        self.letterbox = letterbox
+        self.letterbox, self.mapping, self._mapped_frame = (
+            mapping.letterbox,
+            mapping,
+            (width, height),
+        )
         self._canvas_dirty = False
         self.stats.canvas_frames += 1
         self.stats.canvas_times.append(time.monotonic())

@@ -21,6 +21,7 @@ from app.controller import TabController
 from app.live import DISABLED_HINT, FROZEN, OFF, PREVIEW, TRACKING, LiveControl
 from app.paths import display_name
 from app.targets_table import targets_table
+from app.zoom import MAX_ZOOM
 from autotrack.params import PRESETS
 
 NEW_TARGET = "new target"
@@ -42,6 +43,8 @@ MAP_KINDS = {
 BOXES_JSON = "Load boxes.json"
 TRAJECTORY_RAW = "raw poses"
 TRAJECTORY_SMOOTHED = "smoothed (0.3 s lag)"
+ZOOM_CLICK = "where you click"
+ZOOM_FOLLOW = "the target in Drag draws"
 """Maps choice -> the map `draw_overlays` blends over the frame."""
 
 
@@ -239,6 +242,10 @@ class DisplayPanel:
     """Holds one image per target while `maps` is MAPS_PANELS (see app/display.py)."""
     legend: viser.GuiMarkdownHandle
     """The 3-D view's legend and the pose error against the ground truth (app/view3d.py)."""
+    zoom: viser.GuiSliderHandle
+    """How much the frame canvas enlarges the frame (1: all of it; app/zoom.py)."""
+    zoom_centre: viser.GuiDropdownHandle
+    """What the zoomed canvas centres on: ZOOM_CLICK or ZOOM_FOLLOW."""
 
 
 def _display_panel(
@@ -247,6 +254,14 @@ def _display_panel(
     with gui.add_folder("Display"):
         canvas = gui.add_dropdown(
             "Canvas", options=(CANVAS_FRAME, CANVAS_3D), initial_value=CANVAS_FRAME
+        )
+        zoom = gui.add_slider("Frame zoom", min=1.0, max=MAX_ZOOM, step=0.5, initial_value=1.0)
+        zoom_centre = gui.add_dropdown(
+            "Zoom centre",
+            options=(ZOOM_CLICK, ZOOM_FOLLOW),
+            initial_value=ZOOM_CLICK,
+            hint="Zoomed, a click on the frame (without Shift) centres it there; or follow "
+            "the target chosen in Drag draws.",
         )
         maps = gui.add_dropdown(
             "Maps",
@@ -271,7 +286,7 @@ def _display_panel(
             f"Choose *Display → Maps → {MAPS_PANELS}* to show each target's maps here."
         )
         folder = gui.add_folder("Maps per target", visible=False)
-    return DisplayPanel(canvas, maps, trajectory, canvas_fps, folder, legend)
+    return DisplayPanel(canvas, maps, trajectory, canvas_fps, folder, legend, zoom, zoom_centre)
 
 
 @dataclass

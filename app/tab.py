@@ -156,6 +156,8 @@ class Tab:
         display.maps.on_update(edit(lambda: submit(self.maps_changed)))
         display.trajectory.on_update(edit(lambda: submit(self.display.wake)))
         display.canvas_fps.on_update(edit(self.display.wake))
+        display.zoom.on_update(edit(lambda: self.display.wake(canvas=True)))
+        display.zoom_centre.on_update(edit(lambda: self.display.wake(canvas=True)))
         self._connect_live()
         session.download_tracks.on_click(lambda _: submit(self.download, "tracks"))
         session.download_poses.on_click(lambda _: submit(self.download, "poses"))
@@ -254,10 +256,28 @@ class Tab:
     def clicked(self, event: viser.SceneClickEvent) -> None:
         """A click on the canvas draws nothing (viser sends no rect-select for a drag of no
         size): on the frame, say how to draw; a shift-click on the 3-D view, where to."""
-        if self.panels.display.canvas.value == CANVAS_FRAME:
+        display = self.panels.display
+        if (
+            display.canvas.value == CANVAS_FRAME
+            and event.modifier is None
+            and (float(display.zoom.value) > 1.0)
+        ):
+            self.worker.submit(self.pan_to, event.screen_pos)
+        elif display.canvas.value == CANVAS_FRAME:
             self._hint(DRAW_HINT)
         elif event.modifier == "shift":
             self._hint(SWITCH_HINT)
+
+    def pan_to(self, screen_pos: tuple[float, float]) -> None:
+        """Centre the zoomed frame canvas on a clicked point (canvas fractions)."""
+        run = self.controller.run
+        if run is None:
+            return
+        mapping = self.display.canvas_mapping(self.controller.frame_size)
+        self.display.zoom_centre = mapping.screen_to_frame(*screen_pos)
+        self.display.wake(canvas=True)
+        x, y = self.display.zoom_centre
+        self.controller.message = f"Zoomed view centred on ({x:.0f}, {y:.0f})."
 
     def place_dragged_box(
         self, screen_min: tuple[float, float], screen_max: tuple[float, float]
@@ -265,12 +285,12 @@ class Tab:
         """A drag (canvas fractions) as a box in frame pixels, placed on the current frame."""
         if self.live.state == PREVIEW:
             raise InputError("freeze a frame first, then draw the boxes on it")
-        letterbox = self.display.canvas_letterbox(self.controller.frame_size)
-        box = letterbox.rect_to_box(screen_min, screen_max)
+        mapping = self.display.canvas_mapping(self.controller.frame_size)
+        box = mapping.rect_to_box(screen_min, screen_max)
         if box is None:
             raise InputError("the dragged box misses the frame or is too thin; drag again")
         self.controller.place_box(box)
-        if not letterbox.rect_inside(screen_min, screen_max):
+        if not mapping.rect_inside(screen_min, screen_max):
             self.controller.message += " The drag passed the frame's edge: the box is cut there."
 
     def seek(self, frame_index: int) -> None:
