@@ -347,6 +347,9 @@ def _debug_panel(gui: viser.GuiApi) -> DebugPanel:
 class Panels:
     """Every widget of a tab, top to bottom (the plots are added after these)."""
 
+    startup: viser.GuiMarkdownHandle
+    """What the server prepares before the first box can track (app/startup.py), while it
+    does; hidden otherwise."""
     status: viser.GuiMarkdownHandle
     video: viser.GuiImageHandle
     sequence: SequencePanel
@@ -361,12 +364,14 @@ class Panels:
 
 def build_panels(gui: viser.GuiApi, config: AppConfig) -> Panels:
     """A tab's widgets, in panel order."""
+    startup = gui.add_markdown("", visible=False)
     status = gui.add_markdown("Opening…")
     video = gui.add_image(
         np.zeros((90, 160, 3), np.uint8), label="Video", format="jpeg", jpeg_quality=80
     )
     debug = _debug_panel(gui)
     return Panels(
+        startup=startup,
         status=status,
         video=video,
         sequence=_sequence_panel(gui, config),

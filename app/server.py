@@ -18,10 +18,10 @@ from app.config import AppConfig
 from app.memory import release_freed_memory
 from app.owners import BrowserSpace, browser_tag
 from app.recordings import RecordingRegistry
+from app.startup import KernelWarmUp
 from app.tab import Tab
 from app.uploads import UploadReceiver
 from autotrack.tracker.target_process import WorkerPool
-from autotrack.tracker.warmup import warm_up
 
 
 class StudioServer:
@@ -52,9 +52,9 @@ class StudioServer:
         self.viser.gui.main_panel.dock_right()
         self.viser.on_client_connect(self._connect)
         self.viser.on_client_disconnect(lambda client: self.close_tab(client.client_id))
-        # Compile the tracker's kernels now, so the first box drawn answers at once.
-        self.warm_up = threading.Thread(target=warm_up, name="kernel-warm-up", daemon=True)
-        self.warm_up.start()
+        # Compile the tracker's kernels now, so the first box drawn answers at once; every
+        # tab shows how it goes meanwhile (app/startup.py).
+        self.warm_up = KernelWarmUp()
 
     @property
     def port(self) -> int:
@@ -121,6 +121,7 @@ class StudioServer:
             tab_id=tab_id,
             space=space,
             worker_pool=self.worker_pool,
+            warm_up=self.warm_up,
         )
         self.uploads.attach(
             gui, tab.panels.sequence.upload, tab_id, tab.receive_upload_file, tab.refuse_upload

@@ -39,6 +39,7 @@ from app.panels import (
 )
 from app.paths import shown_paths
 from app.recordings import RecordingRegistry
+from app.startup import KernelWarmUp
 from app.view3d import DEFAULT_FOV
 from app.worker import Worker
 from autotrack.errors import InputError
@@ -72,8 +73,11 @@ class Tab:
         tab_id: int,
         space: BrowserSpace | None = None,
         worker_pool: WorkerPool | None = None,
+        warm_up: KernelWarmUp | None = None,
     ) -> None:
         self.tab_id = tab_id
+        self.warm_up = warm_up
+        """The server's kernel warm-up (None: none runs), whose notice the tab shows."""
         self.channel = channel
         self.controller = TabController(
             config,
@@ -114,6 +118,7 @@ class Tab:
         scene_api.on_click(modifier="shift")(self.clicked)  # a drag of no size is a click
         scene_api.on_click()(self.clicked)
         channel.on_canvas_change(self.display.canvas_resized)
+        self._stop_notice = None if warm_up is None else warm_up.subscribe(self.show_startup)
 
     def _connect(self) -> None:
         """Each widget's callback: read its value, queue a controller command."""
@@ -250,7 +255,8 @@ class Tab:
         if self.panels.display.canvas.value != CANVAS_FRAME:
             self._hint(SWITCH_HINT)
             return
-        self._busy("drawing the box: starting its tracker…")
+        waiting = "" if self.warm_up is None else self.warm_up.box_wait()
+        self._busy(f"drawing the box: starting its tracker{waiting}…")
         self.worker.submit(self.place_dragged_box, event.screen_min, event.screen_max)
 
     def clicked(self, event: viser.SceneClickEvent) -> None:
@@ -369,6 +375,14 @@ class Tab:
         status = self.panels.status
         self.panels.quiet.set(status, "content", f"⏳ **Working**: {what}\n\n{status.content}")
 
+    def show_startup(self, notice: str) -> None:
+        """Show what the server prepares before a box can track ('' hides the notice)."""
+        startup, quiet = self.panels.startup, self.panels.quiet
+        if startup.content != notice:
+            quiet.set(startup, "content", notice)
+        if startup.visible != bool(notice):
+            quiet.set(startup, "visible", bool(notice))
+
     def _hint(self, message: str) -> None:
         """Say how to use the canvas, over it (a note) and in the status line."""
         self.channel.notify("AutoTrack Studio", message)
@@ -412,6 +426,8 @@ class Tab:
 
     def close(self) -> None:
         """Stop the threads and finish the recording (the tab's browser went away)."""
+        if self._stop_notice is not None:
+            self._stop_notice()
         self.worker.close()
         self.live.halt()
         self.display.close()
