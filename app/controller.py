@@ -626,6 +626,7 @@ class TabController(SessionCommands):
             charted,
             truths=truths,
             truth_poses=self.truth_poses,
+            playing=self.playing,
         )
 
     def close(self) -> None:

@@ -47,6 +47,25 @@ GUI_FPS = 30.0
 """Most video-panel updates per second (viser keeps only the latest anyway)."""
 SLOW_FPS = 5.0
 """Most status, plot, map-panel and 3-D updates per second."""
+PLAYING_SLOW_FPS = 2.0
+"""The same while playing: the browser shares the machine's cores with the trackers (headless
+Chromium drew the demo's playback with 0.65 of a core), and charts redrawn more often than
+this do not read any better while they scroll."""
+
+
+def send_periods(
+    playing: bool, canvas_shows_frame: bool, canvas_period: float
+) -> tuple[float, float]:
+    """(video panel, slow updates) periods in seconds. While playing with the frame on the
+    canvas, the video panel (the same picture, smaller) follows the canvas's rate, and the
+    slow updates come PLAYING_SLOW_FPS times a second: what the browser draws is what takes
+    the trackers' CPU. Paused, everything is sent at its full rate."""
+    if not playing:
+        return 1.0 / GUI_FPS, 1.0 / SLOW_FPS
+    video = max(1.0 / GUI_FPS, canvas_period) if canvas_shows_frame else 1.0 / GUI_FPS
+    return video, 1.0 / PLAYING_SLOW_FPS
+
+
 VIDEO_MAX_WIDTH = 640
 """Largest width of the video-panel image (pixels): the panel is narrow, and drawing on a
 smaller image leaves the CPU to the tracker."""
@@ -279,6 +298,10 @@ class DisplayLoop:
     def _canvas_period(self) -> float:
         return 1.0 / max(1.0, float(self.panels.display.canvas_fps.value))
 
+    def _periods(self, view: FrameView | None, mode: str) -> tuple[float, float]:
+        playing = view is not None and view.playing
+        return send_periods(playing, mode == CANVAS_FRAME, self._canvas_period())
+
     def _wait(
         self, shown: dict[str, int], last: dict[str, float], mode_shown: str | None
     ) -> tuple[FrameView | None, int, str, float] | None:
@@ -290,11 +313,12 @@ class DisplayLoop:
                     return None
                 view, version, now = self._view, self._version, time.monotonic()
                 mode = self.panels.display.canvas.value
+                video_period, slow_period = self._periods(view, mode)
                 due: list[float] = []
                 if view is not None and version != shown["video"]:
-                    due.append(last["video"] + 1.0 / GUI_FPS)
+                    due.append(last["video"] + video_period)
                 if view is not None and version != shown["slow"]:
-                    due.append(last["slow"] + 1.0 / SLOW_FPS)
+                    due.append(last["slow"] + slow_period)
                 if (
                     view is not None
                     and mode == CANVAS_FRAME
@@ -317,7 +341,8 @@ class DisplayLoop:
         last: dict[str, float],
     ) -> None:
         maps = self.panels.display.maps.value
-        if version != shown["video"] and now >= last["video"] + 1.0 / GUI_FPS:
+        video_period, slow_period = self._periods(view, mode)
+        if version != shown["video"] and now >= last["video"] + video_period:
             self.panels.video.image = picture(view, maps, VIDEO_MAX_WIDTH, self._show_truth())
             self.stats.video_frames += 1
             self.stats.video_times.append(now)
@@ -335,7 +360,7 @@ class DisplayLoop:
         ):
             self._send_canvas(view, maps)
             shown["canvas"], last["canvas"] = version, now
-        if version != shown["slow"] and now >= last["slow"] + 1.0 / SLOW_FPS:
+        if version != shown["slow"] and now >= last["slow"] + slow_period:
             self._send_slow(view, maps)
             shown["slow"], last["slow"] = version, now
 

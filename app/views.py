@@ -95,6 +95,9 @@ class FrameView:
     ground truth, or the one target of a benchmark sequence)."""
     truth_poses: TruthPoses | None = None
     """The ground-truth camera poses (the display computes the pose error from them)."""
+    playing: bool = False
+    """Whether playback (or a live run) goes on past this frame (the display then sends less
+    often what the browser spends the most drawing)."""
 
 
 def frame_view(
@@ -107,6 +110,7 @@ def frame_view(
     *,
     truths: tuple[TruthView, ...] = (),
     truth_poses: TruthPoses | None = None,
+    playing: bool = False,
 ) -> FrameView:
     """The snapshot of `run` at `frame_index` (`selected`: the target drawn thicker;
     `message`: the tab's last message, under the status line; `play_seconds`: the in-app time
@@ -167,6 +171,7 @@ def frame_view(
         truth=truth,
         truths=truths or (() if truth is None else (truth,)),
         truth_poses=truth_poses,
+        playing=playing,
     )
 
 
