@@ -296,6 +296,8 @@ class SessionPanel:
     recording: viser.GuiMarkdownHandle
     download_tracks: viser.GuiButtonHandle
     download_poses: viser.GuiButtonHandle
+    download_mot: viser.GuiButtonHandle
+    download_cvat: viser.GuiButtonHandle
     download_mcap: viser.GuiButtonHandle
     sessions: viser.GuiDropdownHandle
     refresh: viser.GuiButtonHandle
@@ -308,6 +310,8 @@ def _session_panel(gui: viser.GuiApi) -> SessionPanel:
             recording=gui.add_markdown("Not recording yet (draw a box)."),
             download_tracks=gui.add_button("Download tracks (zip)"),
             download_poses=gui.add_button("Download poses (TUM)"),
+            download_mot=gui.add_button("Download tracks (MOT Challenge)"),
+            download_cvat=gui.add_button("Download tracks (CVAT for video XML)"),
             download_mcap=gui.add_button("Download session (MCAP)"),
             sessions=gui.add_dropdown("Sessions", options=(NO_CHOICE,)),
             refresh=gui.add_button("Refresh sessions"),

@@ -45,8 +45,12 @@ from app.worker import Worker
 from autotrack.errors import InputError
 from autotrack.tracker.target_process import WorkerPool
 
-TABLE_PERIOD = 0.25
+TABLE_PERIOD = 0.5
 """Seconds between Targets-table updates while frames change (playing, tracking ahead)."""
+SLIDER_PERIOD = 0.2
+"""Seconds between Frame-slider updates while frames change: each is a GUI message the page
+re-renders its panel for, which cost headless Chromium more than a tracked frame at 50
+frames/s (the slider is set to the last frame when playback stops)."""
 DRAW_HINT = (
     "A click draws no box: hold Shift and drag from one corner of the box to the other "
     "(on a target's box, the drag corrects it)."
@@ -101,6 +105,7 @@ class Tab:
         self._framed: tuple[object, bool] = (None, False)
         """(run, with its trajectory) the 3-D view was last framed on."""
         self._table_shown = 0.0
+        self._slider_shown = 0.0
         controller = self.controller
         self.live = LiveControl(controller, config.allow_live)
         self.worker = Worker(
@@ -166,6 +171,8 @@ class Tab:
         self._connect_live()
         session.download_tracks.on_click(lambda _: submit(self.download, "tracks"))
         session.download_poses.on_click(lambda _: submit(self.download, "poses"))
+        session.download_mot.on_click(lambda _: submit(self.download, "mot"))
+        session.download_cvat.on_click(lambda _: submit(self.download, "cvat"))
         session.download_mcap.on_click(lambda _: submit(self.download, "mcap"))
         session.refresh.on_click(lambda _: submit(controller.refresh_sessions))
         session.reopen.on_click(lambda _: submit(controller.reopen, session.sessions.value))
@@ -356,8 +363,10 @@ class Tab:
             self._command_done()
 
     def _frame_changed(self) -> None:
-        show_frame(self.panels, self.controller)
         now = time.monotonic()
+        if now >= self._slider_shown + SLIDER_PERIOD:  # the Frame slider follows playback
+            show_frame(self.panels, self.controller)
+            self._slider_shown = now
         if now >= self._table_shown + TABLE_PERIOD:  # the Targets table follows playback
             show_targets(self.panels, self.controller)
             self._table_shown = now

@@ -824,16 +824,34 @@ def test_download_buttons_send_tracks_poses_and_the_session(studio) -> None:
     assert tab.wait_idle()
 
     session = tab.panels.session
-    for button in (session.download_tracks, session.download_poses, session.download_mcap):
+    buttons = (
+        session.download_tracks,
+        session.download_poses,
+        session.download_mot,
+        session.download_cvat,
+        session.download_mcap,
+    )
+    for button in buttons:
         _click(button)
     assert tab.wait_idle()
 
     path = tab.controller.run.session_path
     names = [name for name, _ in channel.downloads]
-    assert names == [f"{path.stem}_tracks.zip", f"{path.stem}_poses.tum", path.name]
+    assert names == [
+        f"{path.stem}_tracks.zip",
+        f"{path.stem}_poses.tum",
+        f"{path.stem}_mot.txt",
+        f"{path.stem}_cvat.xml",
+        path.name,
+    ]
     with zipfile.ZipFile(io.BytesIO(channel.downloads[0][1])) as archive:
         assert sorted(archive.namelist()) == ["T1.txt", "T2.txt", "T3.txt", "T4.txt", "tracks.csv"]
-    assert channel.downloads[2][1][:8] == b"\x89MCAP0\r\n"
+    # MOT: frame, id, x, y, w, h, score, ... one row per target and frame (1-based frames).
+    mot_rows = [row.split(",") for row in channel.downloads[2][1].decode().splitlines()]
+    assert len(mot_rows) == 4 * 6 and {row[0] for row in mot_rows} == {str(k) for k in range(1, 7)}
+    cvat = channel.downloads[3][1].decode()
+    assert "<original_size>" in cvat and "<width>960</width>" in cvat and cvat.count("<track ") == 4
+    assert channel.downloads[4][1][:8] == b"\x89MCAP0\r\n"
 
 
 def test_two_tabs_keep_separate_runs_and_cannot_reopen_a_live_session(studio) -> None:
@@ -1292,3 +1310,39 @@ def test_the_tracker_choice_applies_or_offers_a_restart_with_it(studio) -> None:
     assert tab.wait_idle()
     assert tab.controller.run.params.name == "strcf" and not restart.visible
     assert sequence.preset.value == "strcf" and not tab.controller.run.targets
+
+
+def test_while_playing_the_display_sends_less_of_what_the_browser_draws() -> None:
+    from app.display import GUI_FPS, PLAYING_SLOW_FPS, SLOW_FPS, send_periods
+
+    assert send_periods(False, True, 0.2) == (1.0 / GUI_FPS, 1.0 / SLOW_FPS)  # paused: all
+    assert send_periods(True, True, 0.2) == (0.2, 1.0 / PLAYING_SLOW_FPS)  # the canvas's rate
+    assert send_periods(True, False, 0.2) == (1.0 / GUI_FPS, 1.0 / PLAYING_SLOW_FPS)  # 3-D
+
+
+def test_the_frame_slider_follows_playback_at_a_few_updates_a_second(studio) -> None:
+    from app.tab import SLIDER_PERIOD
+
+    tab, _ = _open_tab(studio)
+    slider, controller = tab.panels.playback.frame, tab.controller
+    tab.worker.submit(controller.load_boxes_json)
+    assert tab.wait_idle()
+    writes: list[float] = []
+    original = tab.panels.quiet.set
+
+    def counted(handle, attribute, value) -> None:
+        if handle is slider and attribute == "value":
+            writes.append(time.monotonic())
+        original(handle, attribute, value)
+
+    tab.panels.quiet.set = counted
+    _set(tab.panels.playback.unlimited, True)
+    started = time.monotonic()
+    _click(tab.panels.playback.play)
+    _wait_for(
+        lambda: not controller.playing and controller.cursor == controller.run.frame_count - 1, 120
+    )
+    assert tab.wait_idle()
+    seconds = time.monotonic() - started
+    assert len(writes) <= seconds / SLIDER_PERIOD + 3  # not one a frame
+    assert slider.value == controller.run.frame_count  # the last frame once it stops
