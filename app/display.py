@@ -170,15 +170,18 @@ class MapPanels:
 
 
 def picture(
-    view: FrameView, maps: str, max_width: int | None, show_truth: bool = False
+    view: FrameView,
+    maps: str,
+    max_width: int | None,
+    show_truth: bool = False,
+    map_opacity: float = 0.7,
 ) -> np.ndarray:
     """The view's frame with boxes, labels, peaks, the chosen map and (`show_truth`) the
     ground-truth box drawn."""
     kind = MAP_KINDS.get(maps, "none")
     truths = [(t.box, t.label) for t in view.truths if t.box is not None] if show_truth else []
-    return draw_overlays(
-        view.frame, list(view.drawings.values()), kind, max_width, truth_boxes=truths
-    )
+    drawings = list(view.drawings.values())
+    return draw_overlays(view.frame, drawings, kind, max_width, map_opacity, truths)
 
 
 class DisplayLoop:
@@ -343,7 +346,9 @@ class DisplayLoop:
         maps = self.panels.display.maps.value
         video_period, slow_period = self._periods(view, mode)
         if version != shown["video"] and now >= last["video"] + video_period:
-            self.panels.video.image = picture(view, maps, VIDEO_MAX_WIDTH, self._show_truth())
+            self.panels.video.image = picture(
+                view, maps, VIDEO_MAX_WIDTH, self._show_truth(), self._opacity()
+            )
             self.stats.video_frames += 1
             self.stats.video_times.append(now)
             self.stats.video_targets = (view.frame_index, tuple(view.drawings))
@@ -372,7 +377,7 @@ class DisplayLoop:
         # a whole (never up: a zoomed window is sent at its own resolution): canvas fractions
         # map to frame pixels exactly through `mapping`.
         image = letterbox_image(
-            mapping.window.crop(picture(view, maps, None, self._show_truth())),
+            mapping.window.crop(picture(view, maps, None, self._show_truth(), self._opacity())),
             mapping.letterbox,
             min(CANVAS_MAX_WIDTH, max(size[0], 320)),
         )
@@ -385,6 +390,9 @@ class DisplayLoop:
         self._canvas_dirty = False
         self.stats.canvas_frames += 1
         self.stats.canvas_times.append(time.monotonic())
+
+    def _opacity(self) -> float:
+        return float(self.panels.display.map_opacity.value)
 
     def _show_truth(self) -> bool:
         return bool(self.panels.targets.show_truth.value)

@@ -242,6 +242,10 @@ class DisplayPanel:
     """Holds one image per target while `maps` is MAPS_PANELS (see app/display.py)."""
     legend: viser.GuiMarkdownHandle
     """The 3-D view's legend and the pose error against the ground truth (app/view3d.py)."""
+    map_opacity: viser.GuiSliderHandle
+    """How opaque the map overlay on the frame is (0..1)."""
+    maps_hint: viser.GuiMarkdownHandle
+    """In the Maps tab: how to show the per-target panels (hidden once they are shown)."""
     zoom: viser.GuiSliderHandle
     """How much the frame canvas enlarges the frame (1: all of it; app/zoom.py)."""
     zoom_centre: viser.GuiDropdownHandle
@@ -268,6 +272,7 @@ def _display_panel(
             options=(MAPS_OFF, MAPS_RESPONSE, MAPS_VARIATION, MAPS_VARIATION_TARGET, MAPS_PANELS),
             initial_value=MAPS_RESPONSE,
         )
+        map_opacity = gui.add_slider("Map opacity", min=0.1, max=1.0, step=0.05, initial_value=0.7)
         trajectory = gui.add_dropdown(
             "3-D trajectory",
             options=(TRAJECTORY_RAW, TRAJECTORY_SMOOTHED),
@@ -282,11 +287,22 @@ def _display_panel(
             initial_value=min(30, max(1, round(config.canvas_fps))),
         )
     with maps_tab:
-        gui.add_markdown(
+        maps_hint = gui.add_markdown(
             f"Choose *Display → Maps → {MAPS_PANELS}* to show each target's maps here."
         )
         folder = gui.add_folder("Maps per target", visible=False)
-    return DisplayPanel(canvas, maps, trajectory, canvas_fps, folder, legend, zoom, zoom_centre)
+    return DisplayPanel(
+        canvas,
+        maps,
+        trajectory,
+        canvas_fps,
+        folder,
+        legend,
+        map_opacity,
+        maps_hint,
+        zoom,
+        zoom_centre,
+    )
 
 
 @dataclass
@@ -399,6 +415,9 @@ def show_state(panels: Panels, controller: TabController) -> None:
     show_targets(panels, controller)
     show_frame(panels, controller)
     show_playing(panels, controller.playing)
+    playback = panels.playback
+    for button in (playback.play, playback.step_back, playback.step):  # nothing to play
+        quiet.set(button, "disabled", run is None or run.frame_count == 0)
     session = panels.session
     quiet.set_options(session.sessions, tuple(controller.session_choices) or (NO_CHOICE,))
     path = None if run is None else run.session_path

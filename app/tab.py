@@ -167,6 +167,7 @@ class Tab:
         display.trajectory.on_update(edit(lambda: submit(self.display.wake)))
         display.canvas_fps.on_update(edit(self.display.wake))
         display.zoom.on_update(edit(lambda: self.display.wake(canvas=True)))
+        display.map_opacity.on_update(edit(lambda: self.display.wake(canvas=True)))
         display.zoom_centre.on_update(edit(lambda: self.display.wake(canvas=True)))
         self._connect_live()
         session.download_tracks.on_click(lambda _: submit(self.download, "tracks"))
@@ -336,6 +337,7 @@ class Tab:
         """Show the per-target map panels only when chosen."""
         shown = self.panels.display.maps.value == MAPS_PANELS
         self.panels.quiet.set(self.panels.display.maps_folder, "visible", shown)
+        self.panels.quiet.set(self.panels.display.maps_hint, "visible", not shown)
         self.display.wake(canvas=True)
 
     # -- after each command and frame ---------------------------------------------------------

@@ -231,16 +231,18 @@ def test_overlay_draws_the_map_inside_the_search_region_only() -> None:
     values = np.zeros((25, 25), np.float32)
     values[5, 20] = 1.0
     result = _result(values)
-    frame = np.full((120, 160, 3), 128, np.uint8)
+    frame = np.full((120, 640, 3), 128, np.uint8)
     drawing = TargetDrawing(label="T1", colour=(255, 0, 0), box=result.box, result=result)
 
     plain = draw_overlays(frame, [drawing], "none")
     mapped = draw_overlays(frame, [drawing], "response")
 
     changed = np.any(mapped != plain, axis=2)
+    assert changed[:40, 420:].any()  # the colour scale's legend, top right
+    changed[:40, 420:] = False
     rows, cols = np.nonzero(changed)
     assert rows.min() >= 15 and rows.max() < 65 and cols.min() >= 20 and cols.max() < 70
-    assert np.array_equal(frame, np.full((120, 160, 3), 128, np.uint8))  # input untouched
+    assert np.array_equal(frame, np.full((120, 640, 3), 128, np.uint8))  # input untouched
     # The peak lies in cell (5, 20) of a 50-px search region on a 25-cell map.
     assert peak_position(result) == pytest.approx((20.0 + 20.5 * 2.0, 15.0 + 5.5 * 2.0))
 
@@ -1346,3 +1348,48 @@ def test_the_frame_slider_follows_playback_at_a_few_updates_a_second(studio) -> 
     seconds = time.monotonic() - started
     assert len(writes) <= seconds / SLIDER_PERIOD + 3  # not one a frame
     assert slider.value == controller.run.frame_count  # the last frame once it stops
+
+
+def test_target_colours_are_distinct_and_none_is_the_aberrant_red() -> None:
+    from app.canvas import ABERRANT, TARGET_COLOURS
+
+    colours = np.array(TARGET_COLOURS, dtype=float)
+    assert len({tuple(c) for c in TARGET_COLOURS}) == len(TARGET_COLOURS)
+    assert np.linalg.norm(colours - np.array(ABERRANT), axis=1).min() > 150
+    assert not any(r > 200 and g < 120 and b < 120 for r, g, b in TARGET_COLOURS)  # no red
+
+
+def test_the_response_overlay_uses_a_robust_scale_and_the_chosen_opacity() -> None:
+    values = np.random.default_rng(2).uniform(0.0, 0.1, (25, 25)).astype(np.float32)
+    values[5, 20] = 50.0  # one extreme peak: a min-max scale would leave the rest dark blue
+    result = _result(values)
+    frame = np.full((120, 160, 3), 128, np.uint8)
+    drawing = TargetDrawing(label="T1", colour=(64, 200, 255), box=result.box, result=result)
+    plain = draw_overlays(frame, [drawing], "none").astype(int)
+    faint = draw_overlays(frame, [drawing], "response", map_opacity=0.2).astype(int)
+    strong = draw_overlays(frame, [drawing], "response", map_opacity=0.9).astype(int)
+    region = (slice(30, 64), slice(22, 68))  # inside the search region, below the legend
+    faint_change = np.abs(faint[region] - plain[region]).mean()
+    strong_change = np.abs(strong[region] - plain[region]).mean()
+    assert strong_change > 3 * faint_change > 0
+    # Spread over the colour scale: the region's colours vary, not one flat blue.
+    assert strong[region].reshape(-1, 3).std(axis=0).max() > 30
+
+
+def test_play_needs_frames_and_the_maps_hint_goes_once_the_panels_are_chosen(studio) -> None:
+    from app.panels import MAPS_PANELS, MAPS_RESPONSE
+
+    tab, _ = _open_tab(studio)
+    playback, display = tab.panels.playback, tab.panels.display
+    assert not playback.play.disabled and not playback.step.disabled
+    tab.worker.submit(tab.controller.close_run)  # nothing open: nothing to play
+    assert tab.wait_idle()
+    assert playback.play.disabled and playback.step.disabled and playback.step_back.disabled
+    tab.worker.submit(tab.controller.open_initial)
+    assert tab.wait_idle() and not playback.play.disabled
+    assert display.maps_hint.visible
+    _set(display.maps, MAPS_PANELS)
+    assert tab.wait_idle()
+    assert not display.maps_hint.visible and display.maps_folder.visible
+    _set(display.maps, MAPS_RESPONSE)
+    assert tab.wait_idle() and display.maps_hint.visible
