@@ -33,7 +33,7 @@ from app.landmarks import LandmarkTies, search_message
 from app.owners import BrowserSpace
 from app.paths import display_name, find_sequences, resolve_user_path, store_upload
 from app.recordings import RecordingRegistry
-from app.reopening import SessionCommands
+from app.reopening import SessionList
 from app.views import FrameView, frame_view
 from autotrack.errors import InputError
 from autotrack.io.boxes_json import read_boxes_json
@@ -52,7 +52,7 @@ POSE_OPTIONS = {"refine_params": RefineParams(), "reacquire_params": ReacquirePa
 landmarks, as `autotrack localize` does."""
 
 
-class TabController(SessionCommands):
+class TabController:
     """One tab's state and commands (see the module docstring).
 
     Args:
@@ -102,8 +102,10 @@ class TabController(SessionCommands):
         """The last thing the tab told its user."""
         self.sequence_choices: dict[str, Path] = {}
         """Name shown in the sequence list -> sequence path."""
-        self.session_choices: dict[str, Path] = {}
-        """Name shown in the session list -> session file, newest first."""
+        self.sessions = SessionList(self)
+        """The recorded sessions this tab lists, and reopening them (app/reopening.py)."""
+        self.suggested_session: str | None = None
+        """The session the Sessions list points to at the start: this browser's last one."""
         self.sequences_opened = 0
         """How many sequences this tab opened (the 3-D scene is rebuilt when it changes)."""
         self.recording_path: Path | None = None
@@ -150,10 +152,38 @@ class TabController(SessionCommands):
     # -- opening sequences --------------------------------------------------------------------
 
     def open_initial(self) -> None:
-        """List sequences and sessions, then open the start-up sequence (else the demo)."""
+        """List sequences and sessions, then open the start-up sequence (else the demo); when
+        this browser recorded a session before (a reloaded page closed its tab), say how to
+        pick it up again."""
         self.refresh_sequences()
         self.refresh_sessions()
         self.open(self.config.sequence or self.config.demo_dir, self.config.scene)
+        last = self.sessions.last_own()
+        self.suggested_session = None if last is None else last.name
+        if last is not None:
+            self.message += (
+                f" Your last session here, {last.name}, is chosen in *Session → Sessions*: "
+                "*Reopen and continue* picks it up where it stopped."
+            )
+
+    # -- the session list (app/reopening.py) ------------------------------------------------
+
+    @property
+    def session_choices(self) -> dict[str, Path]:
+        """Name shown in the session list -> session file, newest first."""
+        return self.sessions.choices
+
+    def refresh_sessions(self) -> None:
+        """List the recorded sessions this tab's browser may see, newest first."""
+        self.sessions.refresh()
+
+    def reopen(self, name: str) -> None:
+        """Reopen the session listed as `name` and continue it (see SessionList.reopen)."""
+        self.sessions.reopen(name)
+
+    def review_session(self, path: Path) -> None:
+        """Open a live run's recording to look through (see SessionList.review)."""
+        self.sessions.review(path)
 
     def refresh_sequences(self) -> None:
         """List the sequences under this tab's folders."""
@@ -269,12 +299,12 @@ class TabController(SessionCommands):
     def open(self, path: Path, scene_path: Path | None, *, scene_given: bool = False) -> None:
         """Open a sequence (and its scene: `scene_path`, else a scene.json beside it unless
         `scene_given`) with the chosen preset, closing the current run and its recording."""
-        frames, scene, scene_path = self._load(path, scene_path, scene_given=scene_given)
-        run = self._new_run(frames, scene, self._recording(path, scene_path))
+        frames, scene, scene_path = self.load_frames(path, scene_path, scene_given=scene_given)
+        run = self.new_run(frames, scene, self.new_recording(path, scene_path))
         self.install_run(run, path, scene_path, preset_name=self.preset_name)
         self.file_run = True
 
-    def _new_run(
+    def new_run(
         self,
         frames: FrameSource,
         scene: Scene | None,
@@ -301,7 +331,7 @@ class TabController(SessionCommands):
             "worker_pool": self.worker_pool,
         }
 
-    def _load(
+    def load_frames(
         self, path: Path, scene_path: Path | None, *, scene_given: bool
     ) -> tuple[FrameSource, Scene | None, Path | None]:
         """The frames and scene of a sequence (the first frame read, so a broken file fails
@@ -317,7 +347,7 @@ class TabController(SessionCommands):
         scene = load_scene(scene_path) if scene_path is not None else None
         return frames, scene, scene_path
 
-    def _recording(self, path: Path, scene_path: Path | None) -> Recording:
+    def new_recording(self, path: Path, scene_path: Path | None) -> Recording:
         """A new session file in the sessions folder, created at the first box."""
         return Recording(source=str(path), directory=self.space.sessions_dir, scene_path=scene_path)
 
@@ -329,6 +359,7 @@ class TabController(SessionCommands):
         self.close_run()
         self.run = run
         self.file_run = False  # open() and reopen() say when the run can be opened again
+        self.suggested_session = None
         self.ground_truth = ground_truth_positions(scene_path)
         self.sequence_path, self.scene_path = path, scene_path
         self.preset_name = preset_name or run.params.name

@@ -452,6 +452,10 @@ def show_opened(panels: Panels, controller: TabController) -> None:
     quiet.set(sequence.preset, "value", controller.preset_name)
     quiet.set(panels.targets.box, "value", "")  # a box typed for the run before is not this one's
     quiet.set(panels.playback.frame, "max", max(2, 0 if run is None else run.frame_count))
+    suggested = controller.suggested_session  # this browser's last session, after a reload
+    if suggested is not None and suggested in controller.session_choices:
+        quiet.set_options(panels.session.sessions, tuple(controller.session_choices))
+        quiet.set(panels.session.sessions, "value", suggested)
     listed = next((n for n, p in controller.sequence_choices.items() if p == path), None)
     if listed is not None:  # the list shows the sequence that is open
         quiet.set(sequence.dropdown, "value", listed)

@@ -1393,3 +1393,23 @@ def test_play_needs_frames_and_the_maps_hint_goes_once_the_panels_are_chosen(stu
     assert not display.maps_hint.visible and display.maps_folder.visible
     _set(display.maps, MAPS_RESPONSE)
     assert tab.wait_idle() and display.maps_hint.visible
+
+
+def test_a_reloaded_page_points_to_the_session_its_tab_recorded(studio) -> None:
+    first, _ = _open_tab(studio, tab_id=1, browser="alice")
+    assert first.controller.suggested_session is None  # nothing recorded before
+    _drag(first, _demo_boxes()["A"])
+    _set(first.panels.playback.frame, 5)
+    assert first.wait_idle()
+    recorded = first.controller.run.session_path
+    studio.close_tab(1)  # a reload closes the tab ...
+
+    again, _ = _open_tab(studio, tab_id=2, browser="alice")  # ... and opens a new one
+    assert again.controller.suggested_session == recorded.name
+    assert again.panels.session.sessions.value == recorded.name
+    assert "Reopen and continue" in again.controller.message
+    _click(again.panels.session.reopen)
+    assert again.wait_idle()
+    assert again.controller.cursor == 4 and list(again.controller.run.targets) == ["T1"]
+    other, _ = _open_tab(studio, tab_id=3, browser="bob")  # another browser: not its session
+    assert other.controller.suggested_session is None
