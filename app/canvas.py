@@ -19,16 +19,18 @@ from autotrack.result import TrackResult
 Box = tuple[float, float, float, float]
 
 TARGET_COLOURS: tuple[tuple[int, int, int], ...] = (
-    (255, 64, 64),
     (64, 200, 255),
     (255, 200, 0),
     (120, 255, 80),
     (255, 80, 255),
-    (255, 140, 0),
     (0, 255, 200),
     (180, 120, 255),
+    (255, 150, 60),
 )
-"""RGB colour of target number i (cycled)."""
+"""RGB colour of target number i (cycled): none red, which marks an aberrant frame (the outer
+box, the charts' dots) and an untrusted pose."""
+ABERRANT = (255, 0, 0)
+"""Colour of an aberrant frame's outer box."""
 
 
 TRUTH = (255, 255, 255)
@@ -323,12 +325,12 @@ def draw_overlays(
     map_kind: str,
     max_width: int | None = None,
     map_opacity: float = 0.7,
-    truth_box: Box | None = None,
+    truth_boxes: Sequence[tuple[Box, str]] = (),
 ) -> np.ndarray:
     """The frame, scaled down to at most `max_width` pixels, with each target's box, label and
     response peak drawn, and its response map ('response') or local variation map
-    ('local_variation') blended over its search region, and `truth_box` (the ground truth) in
-    white. An aberrant frame gets a red outer box and the word ABERRANT. The input frame is not
+    ('local_variation') blended over its search region, and `truth_boxes` (the ground truth,
+    (box, label) each) in white. An aberrant frame gets a red outer box and the word ABERRANT. The input frame is not
     modified."""
     rgb = as_rgb(frame)
     scale = 1.0
@@ -344,8 +346,8 @@ def draw_overlays(
     line = max(1, round(canvas.shape[1] / 640))
     if map_kind in ("response", "local_variation", "local_variation_target"):
         _blend_maps(canvas, targets, map_kind, scale, map_opacity)
-    if truth_box is not None:
-        _truth_on(canvas, scaled(truth_box), line)
+    for truth_box, truth_label in truth_boxes:
+        _truth_on(canvas, scaled(truth_box), line, truth_label)
     for target in targets:
         x, y, w, h = scaled(target.box)
         top_left = (round(x), round(y))
@@ -360,7 +362,7 @@ def draw_overlays(
                 canvas,
                 (top_left[0] - 3 * line, top_left[1] - 3 * line),
                 (bottom_right[0] + 3 * line, bottom_right[1] + 3 * line),
-                (255, 0, 0),
+                ABERRANT,
                 line,
                 cv2.LINE_4,
             )
@@ -411,27 +413,31 @@ def _blend_maps(
         region = result.search_box
         if map_kind == "local_variation_target":  # only where ASR uses it
             values, region = target_part(values, result.search_box, target.box)
-        limits = None if map_kind == "response" else robust_limits(values)
+        limits = robust_limits(values)  # a few extreme values do not wash the rest out
+        if limits is None or not limits[1] > limits[0]:  # a spike on a flat map: min-max
+            finite = values[np.isfinite(values)]
+            limits = (float(finite.min()), float(finite.max())) if finite.size else None
         blend_map(canvas, values, scaled(region), opacity, limits)
         legend = limits or legend
     if legend is not None:
-        _legend_on(canvas, legend)
+        _legend_on(canvas, legend, "response" if map_kind == "response" else "local var.")
 
 
-def _truth_on(canvas: np.ndarray, box: Box, line: int) -> None:
-    """The ground-truth box, white, labelled GT under it, in place."""
+def _truth_on(canvas: np.ndarray, box: Box, line: int, label: str = "GT") -> None:
+    """A ground-truth box, white, labelled (`GT`, `GT A`) under it, in place."""
     x, y, w, h = box
     cv2.rectangle(canvas, (round(x), round(y)), (round(x + w), round(y + h)), TRUTH, line)
     origin = (round(x), round(y + h) + 14 * line)
-    cv2.putText(canvas, "GT", origin, cv2.FONT_HERSHEY_SIMPLEX, 0.45 * line, TRUTH, line)
+    cv2.putText(canvas, label, origin, cv2.FONT_HERSHEY_SIMPLEX, 0.45 * line, TRUTH, line)
 
 
-def _legend_on(canvas: np.ndarray, limits: Limits) -> None:
-    """The local-variation colour scale in the frame's top-right corner, in place (drawn at
-    220 px and enlarged with wide frames, so it reads at the same size on the page)."""
+def _legend_on(canvas: np.ndarray, limits: Limits, name: str) -> None:
+    """The overlay's colour scale (`name`: what it maps) in the frame's top-right corner, in
+    place (drawn at 220 px and enlarged with wide frames, so it reads at the same size on the
+    page)."""
     width = min(220, canvas.shape[1])
     bar = legend_bar(width, limits)
-    _label(bar, "local var. p2-p98", (width // 2 - 55, 22), (80, 80, 80))
+    _label(bar, f"{name} p2-p98", (width // 2 - 55, 22), (80, 80, 80))
     zoom = max(1, round(canvas.shape[1] / 640))
     bar = cv2.resize(bar, (width * zoom, bar.shape[0] * zoom), interpolation=cv2.INTER_NEAREST)
     bar = bar[:, : canvas.shape[1]]

@@ -19,12 +19,21 @@ import numpy as np
 from app import exports
 from app.boxes import Box, ground_truth_positions, overlapped_target
 from app.config import AppConfig
-from app.groundtruth import load_truth, truth_view
+from app.groundtruth import (
+    TruthPoses,
+    TruthView,
+    charted_view,
+    landmark_truth_views,
+    load_landmark_truth,
+    load_truth,
+    load_truth_poses,
+    truth_view,
+)
 from app.landmarks import LandmarkTies, search_message
 from app.owners import BrowserSpace
 from app.paths import display_name, find_sequences, resolve_user_path, store_upload
 from app.recordings import RecordingRegistry
-from app.reopening import SessionCommands
+from app.reopening import SessionList
 from app.views import FrameView, frame_view
 from autotrack.errors import InputError
 from autotrack.io.boxes_json import read_boxes_json
@@ -43,7 +52,7 @@ POSE_OPTIONS = {"refine_params": RefineParams(), "reacquire_params": ReacquirePa
 landmarks, as `autotrack localize` does."""
 
 
-class TabController(SessionCommands):
+class TabController:
     """One tab's state and commands (see the module docstring).
 
     Args:
@@ -93,8 +102,10 @@ class TabController(SessionCommands):
         """The last thing the tab told its user."""
         self.sequence_choices: dict[str, Path] = {}
         """Name shown in the sequence list -> sequence path."""
-        self.session_choices: dict[str, Path] = {}
-        """Name shown in the session list -> session file, newest first."""
+        self.sessions = SessionList(self)
+        """The recorded sessions this tab lists, and reopening them (app/reopening.py)."""
+        self.suggested_session: str | None = None
+        """The session the Sessions list points to at the start: this browser's last one."""
         self.sequences_opened = 0
         """How many sequences this tab opened (the 3-D scene is rebuilt when it changes)."""
         self.recording_path: Path | None = None
@@ -105,8 +116,15 @@ class TabController(SessionCommands):
         """The sequence's ground-truth boxes (0-based, one row per frame), if it has some."""
         self.truth_target: str | None = None
         """The target started from the ground truth (scored against it)."""
+        self.landmark_truth: dict[str, np.ndarray] = {}
+        """Landmark id -> its ground-truth boxes (groundtruth/<landmark>.txt, e.g. the demo's)."""
+        self.truth_poses: TruthPoses | None = None
+        """The scene's ground-truth camera poses per frame (poses_gt.tum), if known."""
         self.play_seconds = np.zeros(0)
         """Per frame: seconds from the previous played frame to this one (NaN: not played)."""
+        self.file_run = False
+        """Whether the run is on a sequence it can be opened again on (not a live source or a
+        live recording looked through)."""
         self._played_at: float | None = None
 
     # -- reading the state --------------------------------------------------------------------
@@ -134,10 +152,38 @@ class TabController(SessionCommands):
     # -- opening sequences --------------------------------------------------------------------
 
     def open_initial(self) -> None:
-        """List sequences and sessions, then open the start-up sequence (else the demo)."""
+        """List sequences and sessions, then open the start-up sequence (else the demo); when
+        this browser recorded a session before (a reloaded page closed its tab), say how to
+        pick it up again."""
         self.refresh_sequences()
         self.refresh_sessions()
         self.open(self.config.sequence or self.config.demo_dir, self.config.scene)
+        last = self.sessions.last_own()
+        self.suggested_session = None if last is None else last.name
+        if last is not None:
+            self.message += (
+                f" Your last session here, {last.name}, is chosen in *Session → Sessions*: "
+                "*Reopen and continue* picks it up where it stopped."
+            )
+
+    # -- the session list (app/reopening.py) ------------------------------------------------
+
+    @property
+    def session_choices(self) -> dict[str, Path]:
+        """Name shown in the session list -> session file, newest first."""
+        return self.sessions.choices
+
+    def refresh_sessions(self) -> None:
+        """List the recorded sessions this tab's browser may see, newest first."""
+        self.sessions.refresh()
+
+    def reopen(self, name: str) -> None:
+        """Reopen the session listed as `name` and continue it (see SessionList.reopen)."""
+        self.sessions.reopen(name)
+
+    def review_session(self, path: Path) -> None:
+        """Open a live run's recording to look through (see SessionList.review)."""
+        self.sessions.review(path)
 
     def refresh_sequences(self) -> None:
         """List the sequences under this tab's folders."""
@@ -171,10 +217,69 @@ class TabController(SessionCommands):
         return path
 
     def choose_preset(self, name: str) -> None:
-        """Use tracker preset `name` for the sequences opened from now on."""
+        """Use tracker preset `name` from the next target on: a run without targets is made
+        again with it at once; a run whose targets track with another preset says so, and
+        `restart_with_preset` opens the sequence again with it."""
         if name not in PRESETS:
             raise InputError(f"unknown tracker preset {name!r}; choose one of {sorted(PRESETS)}")
         self.preset_name = name
+        if self.run is None or self.run.params.name == name:
+            self.message = f"Tracker: {name}."
+        elif self._follow_preset():
+            self.message = f"Tracker: {name}, for the targets drawn from now on."
+        else:
+            self.message = self.preset_note()
+
+    @property
+    def preset_pending(self) -> bool:
+        """Whether the chosen preset differs from the one the open run's targets track with."""
+        return self.run is not None and self.run.params.name != self.preset_name
+
+    def preset_note(self) -> str:
+        """What the page says while the chosen preset waits for a restart ('' when none)."""
+        if not self.preset_pending:
+            return ""
+        used, chosen = self.require_run().params.name, self.preset_name
+        if not self.file_run:
+            return (
+                f"This run tracks with {used}: {chosen} applies to the next sequence opened "
+                "(a live source's run cannot be restarted)."
+            )
+        return (
+            f"This run's targets track with {used}: {chosen} applies only after "
+            f"*Sequence → Restart with {chosen}* (opens this sequence again on this frame; "
+            "the session recorded so far is kept)."
+        )
+
+    def _follow_preset(self) -> bool:
+        """Before the run's first target: make the run again with the chosen preset if it has
+        another (the session then records the parameters the targets really use). True when
+        the run uses the chosen preset afterwards."""
+        run = self.require_run()
+        if run.params.name == self.preset_name:
+            return True
+        if run.targets or not self.file_run or self.sequence_path is None:
+            return False
+        cursor, message = self.cursor, self.message
+        self.open(self.sequence_path, self.scene_path, scene_given=True)
+        self.cursor, self.message = min(cursor, self.require_run().frame_count - 1), message
+        return True
+
+    def restart_with_preset(self) -> None:
+        """Open the sequence again with the chosen preset, on the current frame (the targets
+        are dropped; the session recorded so far is finished and kept)."""
+        run = self.require_run()
+        if not self.preset_pending:
+            raise InputError(f"this run already tracks with {run.params.name}")
+        if not self.file_run or self.sequence_path is None:
+            raise InputError(self.preset_note())
+        cursor = self.cursor
+        self.open(self.sequence_path, self.scene_path, scene_given=True)
+        self.cursor = min(cursor, self.require_run().frame_count - 1)
+        self.message = (
+            f"Restarted with {self.preset_name} on frame {self.cursor + 1}: draw the targets "
+            "again (or Start from ground truth)."
+        )
 
     def open_upload(self, file_name: str, content: bytes | Path) -> None:
         """Store an uploaded video or zip of images (bytes or a received file) safely, then
@@ -194,11 +299,12 @@ class TabController(SessionCommands):
     def open(self, path: Path, scene_path: Path | None, *, scene_given: bool = False) -> None:
         """Open a sequence (and its scene: `scene_path`, else a scene.json beside it unless
         `scene_given`) with the chosen preset, closing the current run and its recording."""
-        frames, scene, scene_path = self._load(path, scene_path, scene_given=scene_given)
-        run = self._new_run(frames, scene, self._recording(path, scene_path))
-        self.install_run(run, path, scene_path)
+        frames, scene, scene_path = self.load_frames(path, scene_path, scene_given=scene_given)
+        run = self.new_run(frames, scene, self.new_recording(path, scene_path))
+        self.install_run(run, path, scene_path, preset_name=self.preset_name)
+        self.file_run = True
 
-    def _new_run(
+    def new_run(
         self,
         frames: FrameSource,
         scene: Scene | None,
@@ -225,7 +331,7 @@ class TabController(SessionCommands):
             "worker_pool": self.worker_pool,
         }
 
-    def _load(
+    def load_frames(
         self, path: Path, scene_path: Path | None, *, scene_given: bool
     ) -> tuple[FrameSource, Scene | None, Path | None]:
         """The frames and scene of a sequence (the first frame read, so a broken file fails
@@ -241,22 +347,30 @@ class TabController(SessionCommands):
         scene = load_scene(scene_path) if scene_path is not None else None
         return frames, scene, scene_path
 
-    def _recording(self, path: Path, scene_path: Path | None) -> Recording:
+    def new_recording(self, path: Path, scene_path: Path | None) -> Recording:
         """A new session file in the sessions folder, created at the first box."""
         return Recording(source=str(path), directory=self.space.sessions_dir, scene_path=scene_path)
 
-    def install_run(self, run: Pipeline, path: Path, scene_path: Path | None) -> None:
-        """Make `run` (on the sequence `path`) this tab's run, replacing the current one."""
+    def install_run(
+        self, run: Pipeline, path: Path, scene_path: Path | None, preset_name: str | None = None
+    ) -> None:
+        """Make `run` (on the sequence `path`) this tab's run, replacing the current one; the
+        Tracker choice shows `preset_name`, by default the run's own (a reopened session's)."""
         self.close_run()
         self.run = run
+        self.file_run = False  # open() and reopen() say when the run can be opened again
+        self.suggested_session = None
         self.ground_truth = ground_truth_positions(scene_path)
         self.sequence_path, self.scene_path = path, scene_path
-        self.preset_name = run.params.name  # a reopened session's own preset
+        self.preset_name = preset_name or run.params.name
         boxes = (path if path.is_dir() else path.parent) / "boxes.json"
         self.boxes_path = boxes if boxes.is_file() and run.scene is not None else None
         self.cursor, self.selected, self.ties = 0, None, LandmarkTies()
         self.play_seconds = np.full(run.frame_count, np.nan)
         self.truth = load_truth(path, run.frame_count)
+        landmarks = () if run.scene is None else run.scene.landmark_ids
+        self.landmark_truth = load_landmark_truth(path, run.frame_count, landmarks)
+        self.truth_poses = load_truth_poses(scene_path, run.frame_count, run.fps)
         self.truth_target = None
         self.sequences_opened += 1
         scene = run.scene
@@ -271,6 +385,7 @@ class TabController(SessionCommands):
             return
         run, finished = self.run, self.recording_path
         self.run, self.recording_path, self.boxes_path, self.truth = None, None, None, None
+        self.landmark_truth, self.truth_poses = {}, None
         try:
             run.close()  # may raise (a full disk): the file and the frames are let go anyway
         finally:
@@ -294,9 +409,11 @@ class TabController(SessionCommands):
         box redrawn (a correction when it was tracked there; it re-tracks from here). A new box
         on top of a target's box corrects that target instead. With a scene, new targets are
         tied to landmarks by the correspondence search once four boxes are on the frame."""
-        run = self.require_run()
         self.stop_playing()
         target_id = self.selected or overlapped_target(self.targets(), self.cursor, box)
+        if target_id is None:
+            self._follow_preset()
+        run = self.require_run()
         if target_id is None:
             if len(run.targets) >= self.config.max_targets:
                 raise InputError(
@@ -304,7 +421,7 @@ class TabController(SessionCommands):
                     "'Drag draws' to redraw its box, or delete one first"
                 )
             target_id = run.add_target(self.cursor, box, None)
-            self.message = f"{target_id} drawn at frame {self.cursor + 1}."
+            self.message = f"{target_id} drawn at frame {self.cursor + 1}. {self.preset_note()}"
             self._search_landmarks()
         else:
             corrected = self.cursor in run.targets[target_id].results
@@ -323,10 +440,15 @@ class TabController(SessionCommands):
 
     def start_from_truth(self) -> None:
         """Start (or restart) the ground-truth target from the current frame's ground-truth
-        box; its live scores are computed against the ground truth."""
-        run = self.require_run()
+        box; its live scores are computed against the ground truth. The first target of a
+        run takes the chosen tracker preset (see choose_preset). A sequence with per-landmark
+        ground truth (the demo's groundtruth/) starts a target per landmark instead."""
+        if self.truth is None and self.landmark_truth:
+            return self._start_from_landmark_truth()
         if self.truth is None:
-            raise InputError("this sequence has no groundtruth_rect.txt")
+            raise InputError("this sequence has no groundtruth_rect.txt or groundtruth/")
+        self._follow_preset()
+        run = self.require_run()
         row = self.truth[self.cursor]
         if not (np.isfinite(row).all() and row[2] > 0 and row[3] > 0):
             raise InputError(f"the ground truth has no box on frame {self.cursor + 1}")
@@ -340,9 +462,56 @@ class TabController(SessionCommands):
             self.truth_target = run.add_target(self.cursor, box, None)
         self.message = (
             f"{self.truth_target} started from the ground truth at frame {self.cursor + 1}; "
-            "its scores grow as it tracks (Debugging → Ground truth)."
-        )
+            f"its scores grow as it tracks (Debugging → Ground truth). {self.preset_note()}"
+        ).strip()
         self.claim_recording()
+
+    def _start_from_landmark_truth(self) -> None:
+        """Every landmark's ground-truth box on the current frame: the target tied to it
+        restarts there, a landmark without one gets a new target."""
+        boxes = {}
+        for landmark_id, rows in self.landmark_truth.items():
+            row = rows[self.cursor]
+            if np.isfinite(row).all() and row[2] > 0 and row[3] > 0:
+                boxes[landmark_id] = (float(row[0]), float(row[1]), float(row[2]), float(row[3]))
+        if not boxes:
+            raise InputError(f"the ground truth has no box on frame {self.cursor + 1}")
+        self.stop_playing()
+        self._follow_preset()
+        run = self.require_run()
+        tied = {t.landmark_id: t.id for t in run.targets.values() if t.landmark_id is not None}
+        new = {lid: box for lid, box in boxes.items() if lid not in tied}
+        if len(run.targets) + len(new) > self.config.max_targets:
+            raise InputError(
+                f"{len(new)} more targets would pass the maximum ({self.config.max_targets}): "
+                "delete some first"
+            )
+        for landmark_id, box in boxes.items():
+            if landmark_id in tied:
+                run.place_box(tied[landmark_id], self.cursor, box)
+        if new:
+            run.add_targets(self.cursor, new)
+        self.message = (
+            f"{len(boxes)} targets started from the landmarks' ground truth at frame "
+            f"{self.cursor + 1}; their scores grow as they track (Debugging → Ground truth). "
+            f"{self.preset_note()}"
+        ).strip()
+        self.claim_recording()
+
+    @property
+    def has_truth(self) -> bool:
+        """Whether the sequence carries ground-truth boxes (one target's, or per landmark)."""
+        return self.truth is not None or bool(self.landmark_truth)
+
+    def truth_views(self) -> tuple[TruthView, ...]:
+        """The ground truth on the current frame and the scores of the targets against it:
+        the target started from groundtruth_rect.txt (else T1), or each landmark's target."""
+        run = self.run
+        if run is None:
+            return ()
+        if self.truth is not None:
+            return (truth_view(self.truth, self.cursor, self.scored_target()),)
+        return landmark_truth_views(self.landmark_truth, run.targets, self.cursor)
 
     def scored_target(self) -> TrackedTarget | None:
         """The target scored against the ground truth: the one started from it, else T1."""
@@ -382,9 +551,11 @@ class TabController(SessionCommands):
     def load_boxes_json(self) -> None:
         """Place the boxes of the sequence's boxes.json on frame 1, one target per landmark
         (a list of boxes is assigned to landmarks by the correspondence search)."""
+        self.boxes_json_boxes("this sequence has no boxes.json")  # refused before reopening
+        self.stop_playing()
+        self._follow_preset()
         run = self.require_run()
         boxes = self.boxes_json_boxes("this sequence has no boxes.json")
-        self.stop_playing()
         self.cursor = 0
         run.add_targets(0, boxes)
         self.message = f"Loaded {len(boxes)} boxes from boxes.json on frame 1."
@@ -477,10 +648,18 @@ class TabController(SessionCommands):
         """Everything the display shows for the current frame (None without a run)."""
         if self.run is None:
             return None
-        truth = self.truth
-        scored = None if truth is None else truth_view(truth, self.cursor, self.scored_target())
+        truths = self.truth_views()
+        charted = charted_view(truths, (self.selected, self.truth_target)) if truths else None
         return frame_view(
-            self.run, self.cursor, self.selected, self.message, self.play_seconds, scored
+            self.run,
+            self.cursor,
+            self.selected,
+            self.message,
+            self.play_seconds,
+            charted,
+            truths=truths,
+            truth_poses=self.truth_poses,
+            playing=self.playing,
         )
 
     def close(self) -> None:

@@ -27,23 +27,45 @@ from app.canvas import (
     thumbnail,
 )
 from app.channel import ClientChannel
+from app.groundtruth import pose_errors
 from app.panels import (
     CANVAS_3D,
     CANVAS_FRAME,
     MAP_KINDS,
     MAPS_PANELS,
     TRAJECTORY_SMOOTHED,
+    ZOOM_FOLLOW,
     Panels,
 )
 from app.plots import SignalPlots
 from app.truthplots import TruthPlots
-from app.view3d import SceneView
+from app.view3d import SceneView, view3d_legend
 from app.views import FrameView, smoothed_view
+from app.zoom import CanvasMapping, ZoomWindow, canvas_mapping, zoom_window
 
 GUI_FPS = 30.0
 """Most video-panel updates per second (viser keeps only the latest anyway)."""
 SLOW_FPS = 5.0
 """Most status, plot, map-panel and 3-D updates per second."""
+PLAYING_SLOW_FPS = 2.0
+"""The same while playing: the browser shares the machine's cores with the trackers (headless
+Chromium drew the demo's playback with 0.65 of a core), and charts redrawn more often than
+this do not read any better while they scroll."""
+
+
+def send_periods(
+    playing: bool, canvas_shows_frame: bool, canvas_period: float
+) -> tuple[float, float]:
+    """(video panel, slow updates) periods in seconds. While playing with the frame on the
+    canvas, the video panel (the same picture, smaller) follows the canvas's rate, and the
+    slow updates come PLAYING_SLOW_FPS times a second: what the browser draws is what takes
+    the trackers' CPU. Paused, everything is sent at its full rate."""
+    if not playing:
+        return 1.0 / GUI_FPS, 1.0 / SLOW_FPS
+    video = max(1.0 / GUI_FPS, canvas_period) if canvas_shows_frame else 1.0 / GUI_FPS
+    return video, 1.0 / PLAYING_SLOW_FPS
+
+
 VIDEO_MAX_WIDTH = 640
 """Largest width of the video-panel image (pixels): the panel is narrow, and drawing on a
 smaller image leaves the CPU to the tracker."""
@@ -148,13 +170,18 @@ class MapPanels:
 
 
 def picture(
-    view: FrameView, maps: str, max_width: int | None, show_truth: bool = False
+    view: FrameView,
+    maps: str,
+    max_width: int | None,
+    show_truth: bool = False,
+    map_opacity: float = 0.7,
 ) -> np.ndarray:
     """The view's frame with boxes, labels, peaks, the chosen map and (`show_truth`) the
     ground-truth box drawn."""
     kind = MAP_KINDS.get(maps, "none")
-    truth = view.truth.box if show_truth and view.truth is not None else None
-    return draw_overlays(view.frame, list(view.drawings.values()), kind, max_width, truth_box=truth)
+    truths = [(t.box, t.label) for t in view.truths if t.box is not None] if show_truth else []
+    drawings = list(view.drawings.values())
+    return draw_overlays(view.frame, drawings, kind, max_width, map_opacity, truths)
 
 
 class DisplayLoop:
@@ -179,7 +206,12 @@ class DisplayLoop:
         self.map_panels = MapPanels(gui, panels.display.maps_folder)
         self.stats = DisplayStats()
         self.letterbox: Letterbox | None = None
-        """How the last canvas background placed the frame (maps rect-selects to pixels)."""
+        """How the last canvas background placed the frame's shown window."""
+        self.mapping: CanvasMapping | None = None
+        """How the last canvas background maps canvas fractions to frame pixels (zoomed)."""
+        self._mapped_frame: tuple[int, int] | None = None
+        self.zoom_centre: tuple[float, float] | None = None
+        """Where the zoomed canvas is centred (frame pixels; None: the frame's centre)."""
         self._lock = threading.Condition()
         self._view: FrameView | None = None
         self._version = 0
@@ -202,21 +234,36 @@ class DisplayLoop:
             self._canvas_dirty = self._canvas_dirty or canvas
             self._lock.notify_all()
 
-    def canvas_letterbox(self, frame_size: tuple[int, int]) -> Letterbox:
-        """How the canvas shows (or will show) a frame of `frame_size` (width, height)."""
-        letterbox = self.letterbox
-        if letterbox is None or (letterbox.frame_width, letterbox.frame_height) != frame_size:
+    def canvas_mapping(self, frame_size: tuple[int, int]) -> CanvasMapping:
+        """How the canvas maps (or will map) a drag to pixels of a frame of `frame_size`."""
+        mapping = self.mapping
+        if mapping is None or self._mapped_frame != frame_size:
             # The canvas still shows another sequence's frame: map as the next one will show.
-            letterbox = fit_letterbox(frame_size, self.channel.canvas_size() or DEFAULT_CANVAS_SIZE)
-        return letterbox
+            size = self.channel.canvas_size() or DEFAULT_CANVAS_SIZE
+            mapping = canvas_mapping(frame_size, size, self.zoom_window(frame_size))
+        return mapping
+
+    def zoom_window(self, frame_size: tuple[int, int], view: FrameView | None = None) -> ZoomWindow:
+        """The window of the frame the canvas shows: the Zoom slider's scale, centred on the
+        target chosen in Drag draws when *Zoom centre* follows it (and `view` has its box),
+        else where the user last clicked."""
+        display = self.panels.display
+        centre = self.zoom_centre
+        if view is not None and display.zoom_centre.value == ZOOM_FOLLOW:
+            chosen = [d for d in view.drawings.values() if d.selected]
+            if chosen:
+                x, y, w, h = chosen[0].box
+                centre = (x + w / 2.0, y + h / 2.0)
+        return zoom_window(frame_size, float(display.zoom.value), centre)
 
     def canvas_resized(self) -> None:
         """The browser's canvas changed: resend the background if its letterbox changed."""
         size = self.channel.canvas_size()
-        letterbox = self.letterbox
-        if letterbox is None or size is None:
+        mapping = self.mapping
+        if mapping is None or size is None:
             return
-        if fit_letterbox((letterbox.frame_width, letterbox.frame_height), size) != letterbox:
+        window = mapping.window
+        if fit_letterbox((window.width, window.height), size) != mapping.letterbox:
             self.wake(canvas=True)
 
     def close(self, timeout: float = 10.0) -> None:
@@ -254,6 +301,10 @@ class DisplayLoop:
     def _canvas_period(self) -> float:
         return 1.0 / max(1.0, float(self.panels.display.canvas_fps.value))
 
+    def _periods(self, view: FrameView | None, mode: str) -> tuple[float, float]:
+        playing = view is not None and view.playing
+        return send_periods(playing, mode == CANVAS_FRAME, self._canvas_period())
+
     def _wait(
         self, shown: dict[str, int], last: dict[str, float], mode_shown: str | None
     ) -> tuple[FrameView | None, int, str, float] | None:
@@ -265,11 +316,12 @@ class DisplayLoop:
                     return None
                 view, version, now = self._view, self._version, time.monotonic()
                 mode = self.panels.display.canvas.value
+                video_period, slow_period = self._periods(view, mode)
                 due: list[float] = []
                 if view is not None and version != shown["video"]:
-                    due.append(last["video"] + 1.0 / GUI_FPS)
+                    due.append(last["video"] + video_period)
                 if view is not None and version != shown["slow"]:
-                    due.append(last["slow"] + 1.0 / SLOW_FPS)
+                    due.append(last["slow"] + slow_period)
                 if (
                     view is not None
                     and mode == CANVAS_FRAME
@@ -292,8 +344,11 @@ class DisplayLoop:
         last: dict[str, float],
     ) -> None:
         maps = self.panels.display.maps.value
-        if version != shown["video"] and now >= last["video"] + 1.0 / GUI_FPS:
-            self.panels.video.image = picture(view, maps, VIDEO_MAX_WIDTH, self._show_truth())
+        video_period, slow_period = self._periods(view, mode)
+        if version != shown["video"] and now >= last["video"] + video_period:
+            self.panels.video.image = picture(
+                view, maps, VIDEO_MAX_WIDTH, self._show_truth(), self._opacity()
+            )
             self.stats.video_frames += 1
             self.stats.video_times.append(now)
             self.stats.video_targets = (view.frame_index, tuple(view.drawings))
@@ -310,26 +365,34 @@ class DisplayLoop:
         ):
             self._send_canvas(view, maps)
             shown["canvas"], last["canvas"] = version, now
-        if version != shown["slow"] and now >= last["slow"] + 1.0 / SLOW_FPS:
+        if version != shown["slow"] and now >= last["slow"] + slow_period:
             self._send_slow(view, maps)
             shown["slow"], last["slow"] = version, now
 
     def _send_canvas(self, view: FrameView, maps: str) -> None:
         size = self.channel.canvas_size() or DEFAULT_CANVAS_SIZE
         height, width = view.frame.shape[:2]
-        letterbox = fit_letterbox((width, height), size)
-        # Drawn at full size and padded in frame pixels, then scaled as a whole: canvas
-        # fractions map to frame pixels exactly through `letterbox`.
+        mapping = canvas_mapping((width, height), size, self.zoom_window((width, height), view))
+        # Drawn at full size, cut to the zoom window and padded in its pixels, then scaled as
+        # a whole (never up: a zoomed window is sent at its own resolution): canvas fractions
+        # map to frame pixels exactly through `mapping`.
         image = letterbox_image(
-            picture(view, maps, None, self._show_truth()),
-            letterbox,
+            mapping.window.crop(picture(view, maps, None, self._show_truth(), self._opacity())),
+            mapping.letterbox,
             min(CANVAS_MAX_WIDTH, max(size[0], 320)),
         )
         self.scene_api.set_background_image(image, format="jpeg", jpeg_quality=80)
-        self.letterbox = letterbox
+        self.letterbox, self.mapping, self._mapped_frame = (
+            mapping.letterbox,
+            mapping,
+            (width, height),
+        )
         self._canvas_dirty = False
         self.stats.canvas_frames += 1
         self.stats.canvas_times.append(time.monotonic())
+
+    def _opacity(self) -> float:
+        return float(self.panels.display.map_opacity.value)
 
     def _show_truth(self) -> bool:
         return bool(self.panels.targets.show_truth.value)
@@ -346,7 +409,13 @@ class DisplayLoop:
         status = view.status + missing_map_note(view, MAP_KINDS.get(maps))
         self.panels.quiet.set(self.panels.status, "content", status)
         self.plots.update(view.history, view.frame_index)
-        self.truth_plots.update(view.truth, view.frame_index)
+        errors = None
+        if view.truth_poses is not None and view.pose_view is not None:
+            errors = pose_errors(view.truth_poses, view.pose_view.poses, view.pose_view.fps)
+        self.truth_plots.update(view.truth, view.frame_index, view.truths, errors)
+        legend = view3d_legend(view.truth_poses is not None, errors)
+        if self.panels.display.legend.content != legend:
+            self.panels.quiet.set(self.panels.display.legend, "content", legend)
         self.stats.plot_updates += 1
         pose_view = view.pose_view
         if pose_view is not None:

@@ -6,16 +6,25 @@ import contextlib
 import os
 import tempfile
 import zipfile
+from collections.abc import Callable
 from io import BytesIO
 from pathlib import Path
 
 from autotrack.errors import AutoTrackError, InputError
 from autotrack.pipeline import Pipeline
-from autotrack.sessions import open_session, write_otb_tracks, write_tracks_csv, write_tum_poses
+from autotrack.sessions import (
+    Session,
+    open_session,
+    write_otb_tracks,
+    write_tracks_csv,
+    write_tum_poses,
+)
+from autotrack.sessions.exports import export_session_cvat, export_session_mot
 from autotrack.sessions.snapshot import finished_copy
 
-EXPORTS = ("tracks", "poses", "mcap")
-"""What `build` can make: the tracks zip, the TUM poses, the session file itself."""
+EXPORTS = ("tracks", "poses", "mot", "cvat", "mcap")
+"""What `build` can make: the tracks zip, the TUM poses, the MOT Challenge tracks, the CVAT
+for video 1.1 XML (drawn and corrected boxes as keyframes), the session file itself."""
 
 
 def build(run: Pipeline, what: str) -> tuple[str, bytes]:
@@ -31,6 +40,15 @@ def build(run: Pipeline, what: str) -> tuple[str, bytes]:
         return f"{path.stem}_tracks.zip", tracks_zip(path)
     if what == "poses":
         return f"{path.stem}_poses.tum", poses_tum(path)
+    if what == "mot":
+        return f"{path.stem}_mot.txt", _written(path, "mot.txt", export_session_mot)
+    if what == "cvat":
+        size = run.frames.frame_size
+
+        def cvat(session: Session, out: Path) -> object:
+            return export_session_cvat(session, out, frame_size=size)
+
+        return f"{path.stem}_cvat.xml", _written(path, "cvat.xml", cvat)
     if what == "mcap":
         return path.name, finished_copy(path)
     raise InputError(f"unknown export {what!r}; choose one of {EXPORTS}")
@@ -54,10 +72,15 @@ def tracks_zip(session_path: Path) -> bytes:
 
 def poses_tum(session_path: Path) -> bytes:
     """The session's valid camera poses in the TUM format (timestamp = frame index / fps)."""
+    return _written(session_path, "poses.tum", write_tum_poses)
+
+
+def _written(session_path: Path, name: str, write: Callable[[Session, Path], object]) -> bytes:
+    """What one of the library's exporters writes for the session, as bytes."""
     session = open_session(session_path)
     with tempfile.TemporaryDirectory(prefix="autotrack-export-", dir=_scratch()) as folder:
-        path = Path(folder) / "poses.tum"
-        write_tum_poses(session, path)
+        path = Path(folder) / name
+        write(session, path)
         return path.read_bytes()
 
 

@@ -293,7 +293,7 @@ class LiveControl:
         figures = self.figures() if self.state == TRACKING else None
         if view is None or figures is None:
             return view
-        return replace(view, status=f"{figures.text()}\n\n{view.status}")
+        return replace(view, status=f"{figures.text()}\n\n{view.status}", playing=True)
 
     def close(self) -> None:
         """Stop reading the source (the run, if any, is the controller's)."""

@@ -22,6 +22,7 @@ from app.controller import TabController
 from app.live import DISABLED_HINT, FROZEN, OFF, PREVIEW, TRACKING, LiveControl
 from app.paths import display_name
 from app.targets_table import targets_table
+from app.zoom import MAX_ZOOM
 from autotrack.params import PRESETS
 
 NEW_TARGET = "new target"
@@ -43,6 +44,8 @@ MAP_KINDS = {
 BOXES_JSON = "Load boxes.json"
 TRAJECTORY_RAW = "raw poses"
 TRAJECTORY_SMOOTHED = "smoothed (0.3 s lag)"
+ZOOM_CLICK = "where you click"
+ZOOM_FOLLOW = "the target in Drag draws"
 """Maps choice -> the map `draw_overlays` blends over the frame."""
 
 
@@ -87,6 +90,8 @@ class SequencePanel:
     scene: viser.GuiTextHandle
     use_scene: viser.GuiButtonHandle
     preset: viser.GuiDropdownHandle
+    restart: viser.GuiButtonHandle
+    """Restart with the chosen preset (shown while the run's targets track with another)."""
     upload: viser.GuiUploadButtonHandle
 
 
@@ -103,6 +108,7 @@ def _sequence_panel(gui: viser.GuiApi, config: AppConfig) -> SequencePanel:
             preset=gui.add_dropdown(
                 "Tracker", options=tuple(PRESETS), initial_value=config.tracker_preset
             ),
+            restart=gui.add_button("Restart with the chosen tracker", visible=False),
             upload=gui.add_upload_button(
                 "Upload video or zip of images", mime_type="video/*,.zip,application/zip"
             ),
@@ -235,6 +241,16 @@ class DisplayPanel:
     canvas_fps: viser.GuiSliderHandle
     maps_folder: viser.GuiFolderHandle
     """Holds one image per target while `maps` is MAPS_PANELS (see app/display.py)."""
+    legend: viser.GuiMarkdownHandle
+    """The 3-D view's legend and the pose error against the ground truth (app/view3d.py)."""
+    map_opacity: viser.GuiSliderHandle
+    """How opaque the map overlay on the frame is (0..1)."""
+    maps_hint: viser.GuiMarkdownHandle
+    """In the Maps tab: how to show the per-target panels (hidden once they are shown)."""
+    zoom: viser.GuiSliderHandle
+    """How much the frame canvas enlarges the frame (1: all of it; app/zoom.py)."""
+    zoom_centre: viser.GuiDropdownHandle
+    """What the zoomed canvas centres on: ZOOM_CLICK or ZOOM_FOLLOW."""
 
 
 def _display_panel(
@@ -244,16 +260,26 @@ def _display_panel(
         canvas = gui.add_dropdown(
             "Canvas", options=(CANVAS_FRAME, CANVAS_3D), initial_value=CANVAS_FRAME
         )
+        zoom = gui.add_slider("Frame zoom", min=1.0, max=MAX_ZOOM, step=0.5, initial_value=1.0)
+        zoom_centre = gui.add_dropdown(
+            "Zoom centre",
+            options=(ZOOM_CLICK, ZOOM_FOLLOW),
+            initial_value=ZOOM_CLICK,
+            hint="Zoomed, a click on the frame (without Shift) centres it there; or follow "
+            "the target chosen in Drag draws.",
+        )
         maps = gui.add_dropdown(
             "Maps",
             options=(MAPS_OFF, MAPS_RESPONSE, MAPS_VARIATION, MAPS_VARIATION_TARGET, MAPS_PANELS),
             initial_value=MAPS_RESPONSE,
         )
+        map_opacity = gui.add_slider("Map opacity", min=0.1, max=1.0, step=0.05, initial_value=0.7)
         trajectory = gui.add_dropdown(
             "3-D trajectory",
             options=(TRAJECTORY_RAW, TRAJECTORY_SMOOTHED),
             initial_value=TRAJECTORY_RAW,
         )
+        legend = gui.add_markdown("")
         canvas_fps = gui.add_slider(
             "Canvas frames/s cap",
             min=1,
@@ -262,11 +288,22 @@ def _display_panel(
             initial_value=min(30, max(1, round(config.canvas_fps))),
         )
     with maps_tab:
-        gui.add_markdown(
+        maps_hint = gui.add_markdown(
             f"Choose *Display → Maps → {MAPS_PANELS}* to show each target's maps here."
         )
         folder = gui.add_folder("Maps per target", visible=False)
-    return DisplayPanel(canvas, maps, trajectory, canvas_fps, folder)
+    return DisplayPanel(
+        canvas,
+        maps,
+        trajectory,
+        canvas_fps,
+        folder,
+        legend,
+        map_opacity,
+        maps_hint,
+        zoom,
+        zoom_centre,
+    )
 
 
 @dataclass
@@ -276,6 +313,8 @@ class SessionPanel:
     recording: viser.GuiMarkdownHandle
     download_tracks: viser.GuiButtonHandle
     download_poses: viser.GuiButtonHandle
+    download_mot: viser.GuiButtonHandle
+    download_cvat: viser.GuiButtonHandle
     download_mcap: viser.GuiButtonHandle
     sessions: viser.GuiDropdownHandle
     refresh: viser.GuiButtonHandle
@@ -288,6 +327,8 @@ def _session_panel(gui: viser.GuiApi) -> SessionPanel:
             recording=gui.add_markdown("Not recording yet (draw a box)."),
             download_tracks=gui.add_button("Download tracks (zip)"),
             download_poses=gui.add_button("Download poses (TUM)"),
+            download_mot=gui.add_button("Download tracks (MOT Challenge)"),
+            download_cvat=gui.add_button("Download tracks (CVAT for video XML)"),
             download_mcap=gui.add_button("Download session (MCAP)"),
             sessions=gui.add_dropdown("Sessions", options=(NO_CHOICE,)),
             refresh=gui.add_button("Refresh sessions"),
@@ -327,6 +368,9 @@ def _debug_panel(gui: viser.GuiApi) -> DebugPanel:
 class Panels:
     """Every widget of a tab, top to bottom (the plots are added after these)."""
 
+    startup: viser.GuiMarkdownHandle
+    """What the server prepares before the first box can track (app/startup.py), while it
+    does; hidden otherwise."""
     status: viser.GuiMarkdownHandle
     video: viser.GuiImageHandle
     sequence: SequencePanel
@@ -341,12 +385,14 @@ class Panels:
 
 def build_panels(gui: viser.GuiApi, config: AppConfig) -> Panels:
     """A tab's widgets, in panel order."""
+    startup = gui.add_markdown("", visible=False)
     status = gui.add_markdown("Opening…")
     video = gui.add_image(
         np.zeros((90, 160, 3), np.uint8), label="Video", format="jpeg", jpeg_quality=80
     )
     debug = _debug_panel(gui)
     return Panels(
+        startup=startup,
         status=status,
         video=video,
         sequence=_sequence_panel(gui, config),
@@ -366,9 +412,13 @@ def show_state(panels: Panels, controller: TabController) -> None:
     run = controller.run
     sequence = panels.sequence
     quiet.set_options(sequence.dropdown, tuple(controller.sequence_choices) or (NO_CHOICE,))
+    show_preset(panels, controller)
     show_targets(panels, controller)
     show_frame(panels, controller)
     show_playing(panels, controller.playing)
+    playback = panels.playback
+    for button in (playback.play, playback.step_back, playback.step):  # nothing to play
+        quiet.set(button, "disabled", run is None or run.frame_count == 0)
     session = panels.session
     quiet.set_options(session.sessions, tuple(controller.session_choices) or (NO_CHOICE,))
     path = None if run is None else run.session_path
@@ -376,6 +426,19 @@ def show_state(panels: Panels, controller: TabController) -> None:
     quiet.set(session.recording, "content", recording)
     if run is None:
         quiet.set(panels.status, "content", markdown_literal(controller.message))
+
+
+def show_preset(panels: Panels, controller: TabController) -> None:
+    """The Tracker choice as the controller holds it, and *Restart with ...* while the run's
+    targets track with another preset."""
+    quiet, sequence = panels.quiet, panels.sequence
+    if sequence.preset.value != controller.preset_name:
+        quiet.set(sequence.preset, "value", controller.preset_name)
+    pending = controller.preset_pending and controller.file_run
+    quiet.set(sequence.restart, "visible", pending)
+    label = f"Restart with {controller.preset_name}"
+    if pending and sequence.restart.label != label:
+        quiet.set(sequence.restart, "label", label)
 
 
 def show_opened(panels: Panels, controller: TabController) -> None:
@@ -390,6 +453,10 @@ def show_opened(panels: Panels, controller: TabController) -> None:
     quiet.set(sequence.preset, "value", controller.preset_name)
     quiet.set(panels.targets.box, "value", "")  # a box typed for the run before is not this one's
     quiet.set(panels.playback.frame, "max", max(2, 0 if run is None else run.frame_count))
+    suggested = controller.suggested_session  # this browser's last session, after a reload
+    if suggested is not None and suggested in controller.session_choices:
+        quiet.set_options(panels.session.sessions, tuple(controller.session_choices))
+        quiet.set(panels.session.sessions, "value", suggested)
     listed = next((n for n, p in controller.sequence_choices.items() if p == path), None)
     if listed is not None:  # the list shows the sequence that is open
         quiet.set(sequence.dropdown, "value", listed)
@@ -430,8 +497,8 @@ def show_targets(panels: Panels, controller: TabController) -> None:
     quiet.set(widgets.delete, "disabled", chosen is None)
     quiet.set(widgets.delete, "label", delete_label(chosen and chosen.id, bool(targets)))
     quiet.set(widgets.boxes_json, "visible", controller.boxes_path is not None)
-    quiet.set(widgets.show_truth, "visible", controller.truth is not None)
-    quiet.set(widgets.from_truth, "visible", controller.truth is not None)
+    quiet.set(widgets.show_truth, "visible", controller.has_truth)
+    quiet.set(widgets.from_truth, "visible", controller.has_truth)
     if chosen is not None and controller.cursor in chosen.results:
         quiet.set(widgets.box, "value", format_box(chosen.results[controller.cursor].box))
     quiet.set(widgets.table, "content", targets_table(controller))

@@ -44,13 +44,26 @@ ETA_CHART = CHART_TITLES.index("Global variation η (log) vs φ")
 
 Chart = tuple[np.ndarray | list[float | None], ...]
 
+EMPTY_SCALES = {"x": {"time": False, "auto": False, "range": (1.0, float(X_STEP))}}
+"""The scales a chart is made with, before it has data: frame numbers on x (uPlot's default x
+scale is time, which labels an empty chart with dates of 1970)."""
+
+
+def frame_numbers(frame_indices: np.ndarray) -> np.ndarray:
+    """The x values of 0-based frame indices: the frame numbers a person reads (1-based, as
+    the Frame slider, the status line and the Targets table), so a chart's hover names the
+    frame the slider shows."""
+    return np.asarray(frame_indices, dtype=float) + 1.0
+
 
 def x_range(last: int, frame_count: int) -> tuple[float, float]:
-    """Frames 0 .. the next multiple of X_STEP past `last` (at most the sequence's end), so the
-    charts fill up as the run advances and rescale only every X_STEP frames; on the last
-    frame, just past it, so the current-frame line drawn after it stays in view."""
-    end = min(frame_count - 1, (last // X_STEP + 1) * X_STEP)
-    return (0.0, float(max(end, 1, last + 2 * CURSOR_OFFSETS[-1])))
+    """Frame numbers 1 .. the next multiple of X_STEP past frame `last` (0-based; at most the
+    sequence's end), so the charts fill up as the run advances and rescale only every X_STEP
+    frames; on the last frame, just past it, so the current-frame line drawn after it stays
+    in view."""
+    number = last + 1
+    end = min(frame_count, (number // X_STEP + 1) * X_STEP)
+    return (1.0, float(max(end, 2, number + 2 * CURSOR_OFFSETS[-1])))
 
 
 def _finite(arrays: Sequence[np.ndarray]) -> np.ndarray:
@@ -111,13 +124,13 @@ def with_cursor(
     span: tuple[float, float],
     frames: np.ndarray | None = None,
 ) -> tuple[np.ndarray, ...]:
-    """(x, *series, cursor line) over `frames` (default: every frame 0..count-1; it must hold
-    the cursor's frame) with the cursor's two points inserted just after frame `cursor`; the
-    line spans `span`."""
+    """(x, *series, cursor line) over `frames` (0-based indices, default: every frame
+    0..count-1; it must hold the cursor's frame) with the cursor's two points inserted just
+    after frame `cursor`; the line spans `span`. x holds frame numbers (`frame_numbers`)."""
     cursor = min(max(cursor, 0), count - 1)
     rows = np.arange(count) if frames is None else np.asarray(frames, dtype=np.int64)
     at = int(np.searchsorted(rows, cursor, side="right"))
-    x = np.concatenate([rows[:at], cursor + np.array(CURSOR_OFFSETS), rows[at:]]).astype(float)
+    x = frame_numbers(np.concatenate([rows[:at], cursor + np.array(CURSOR_OFFSETS), rows[at:]]))
     out = [x]
     for values in series:
         shown = values[rows]
@@ -322,6 +335,7 @@ class SignalPlots:
                         aspect=2.0,
                         padding=CHART_PADDING,
                         axes=self._initial_axes(index),
+                        scales=EMPTY_SCALES,
                     )
                 )
         self._handles = handles

@@ -19,6 +19,7 @@ from app.config import AppConfig
 from app.memory import limit_malloc_arenas, release_freed_memory
 from app.owners import BrowserSpace, browser_tag
 from app.recordings import RecordingRegistry
+from app.startup import KernelWarmUp
 from app.tab import Tab
 from app.uploads import UploadReceiver
 from app.viser_private import check_viser_version, guard_handshakes, handshake_headers
@@ -59,9 +60,9 @@ class StudioServer:
         self.viser.gui.main_panel.dock_right()
         self.viser.on_client_connect(self._connect)
         self.viser.on_client_disconnect(lambda client: self.close_tab(client.client_id))
-        # Compile the tracker's kernels now, so the first box drawn answers at once.
-        self.warm_up = threading.Thread(target=warm_up, name="kernel-warm-up", daemon=True)
-        self.warm_up.start()
+        # Compile the tracker's kernels now, so the first box drawn answers at once; every
+        # tab shows how it goes meanwhile (app/startup.py).
+        self.warm_up = KernelWarmUp()
 
     @property
     def port(self) -> int:
@@ -125,6 +126,7 @@ class StudioServer:
             tab_id=tab_id,
             space=space,
             worker_pool=self.worker_pool,
+            warm_up=self.warm_up,
         )
         self.uploads.attach(
             gui,

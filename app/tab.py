@@ -39,13 +39,18 @@ from app.panels import (
 )
 from app.paths import shown_paths
 from app.recordings import RecordingRegistry
+from app.startup import KernelWarmUp
 from app.view3d import DEFAULT_FOV
 from app.worker import Worker
 from autotrack.errors import InputError
 from autotrack.tracker.parallel.target_process import WorkerPool
 
-TABLE_PERIOD = 0.25
+TABLE_PERIOD = 0.5
 """Seconds between Targets-table updates while frames change (playing, tracking ahead)."""
+SLIDER_PERIOD = 0.2
+"""Seconds between Frame-slider updates while frames change: each is a GUI message the page
+re-renders its panel for, which cost headless Chromium more than a tracked frame at 50
+frames/s (the slider is set to the last frame when playback stops)."""
 DRAW_HINT = (
     "A click draws no box: hold Shift and drag from one corner of the box to the other "
     "(on a target's box, the drag corrects it)."
@@ -72,8 +77,11 @@ class Tab:
         tab_id: int,
         space: BrowserSpace | None = None,
         worker_pool: WorkerPool | None = None,
+        warm_up: KernelWarmUp | None = None,
     ) -> None:
         self.tab_id = tab_id
+        self.warm_up = warm_up
+        """The server's kernel warm-up (None: none runs), whose notice the tab shows."""
         self.channel = channel
         self.controller = TabController(
             config,
@@ -97,6 +105,7 @@ class Tab:
         self._framed: tuple[object, bool] = (None, False)
         """(run, with its trajectory) the 3-D view was last framed on."""
         self._table_shown = 0.0
+        self._slider_shown = 0.0
         controller = self.controller
         self.live = LiveControl(controller, config.allow_live)
         self.worker = Worker(
@@ -114,6 +123,7 @@ class Tab:
         scene_api.on_click(modifier="shift")(self.clicked)  # a drag of no size is a click
         scene_api.on_click()(self.clicked)
         channel.on_canvas_change(self.display.canvas_resized)
+        self._stop_notice = None if warm_up is None else warm_up.subscribe(self.show_startup)
 
     def _connect(self) -> None:
         """Each widget's callback: read its value, queue a controller command."""
@@ -130,6 +140,7 @@ class Tab:
         sequence.preset.on_update(
             edit(lambda: submit(controller.choose_preset, sequence.preset.value))
         )
+        sequence.restart.on_click(lambda _: submit(controller.restart_with_preset))
         sequence.upload.on_upload(
             lambda _: self.receive_upload(sequence.upload.value.name, sequence.upload.value.content)
         )
@@ -155,9 +166,14 @@ class Tab:
         display.maps.on_update(edit(lambda: submit(self.maps_changed)))
         display.trajectory.on_update(edit(lambda: submit(self.display.wake)))
         display.canvas_fps.on_update(edit(self.display.wake))
+        display.zoom.on_update(edit(lambda: self.display.wake(canvas=True)))
+        display.map_opacity.on_update(edit(lambda: self.display.wake(canvas=True)))
+        display.zoom_centre.on_update(edit(lambda: self.display.wake(canvas=True)))
         self._connect_live()
         session.download_tracks.on_click(lambda _: submit(self.download, "tracks"))
         session.download_poses.on_click(lambda _: submit(self.download, "poses"))
+        session.download_mot.on_click(lambda _: submit(self.download, "mot"))
+        session.download_cvat.on_click(lambda _: submit(self.download, "cvat"))
         session.download_mcap.on_click(lambda _: submit(self.download, "mcap"))
         session.refresh.on_click(lambda _: submit(controller.refresh_sessions))
         session.reopen.on_click(lambda _: submit(controller.reopen, session.sessions.value))
@@ -247,16 +263,35 @@ class Tab:
         if self.panels.display.canvas.value != CANVAS_FRAME:
             self._hint(SWITCH_HINT)
             return
-        self._busy("drawing the box: starting its tracker…")
+        waiting = "" if self.warm_up is None else self.warm_up.box_wait()
+        self._busy(f"drawing the box: starting its tracker{waiting}…")
         self.worker.submit(self.place_dragged_box, event.screen_min, event.screen_max)
 
     def clicked(self, event: viser.SceneClickEvent) -> None:
         """A click on the canvas draws nothing (viser sends no rect-select for a drag of no
         size): on the frame, say how to draw; a shift-click on the 3-D view, where to."""
-        if self.panels.display.canvas.value == CANVAS_FRAME:
+        display = self.panels.display
+        if (
+            display.canvas.value == CANVAS_FRAME
+            and event.modifier is None
+            and (float(display.zoom.value) > 1.0)
+        ):
+            self.worker.submit(self.pan_to, event.screen_pos)
+        elif display.canvas.value == CANVAS_FRAME:
             self._hint(DRAW_HINT)
         elif event.modifier == "shift":
             self._hint(SWITCH_HINT)
+
+    def pan_to(self, screen_pos: tuple[float, float]) -> None:
+        """Centre the zoomed frame canvas on a clicked point (canvas fractions)."""
+        run = self.controller.run
+        if run is None:
+            return
+        mapping = self.display.canvas_mapping(self.controller.frame_size)
+        self.display.zoom_centre = mapping.screen_to_frame(*screen_pos)
+        self.display.wake(canvas=True)
+        x, y = self.display.zoom_centre
+        self.controller.message = f"Zoomed view centred on ({x:.0f}, {y:.0f})."
 
     def place_dragged_box(
         self, screen_min: tuple[float, float], screen_max: tuple[float, float]
@@ -264,12 +299,12 @@ class Tab:
         """A drag (canvas fractions) as a box in frame pixels, placed on the current frame."""
         if self.live.state == PREVIEW:
             raise InputError("freeze a frame first, then draw the boxes on it")
-        letterbox = self.display.canvas_letterbox(self.controller.frame_size)
-        box = letterbox.rect_to_box(screen_min, screen_max)
+        mapping = self.display.canvas_mapping(self.controller.frame_size)
+        box = mapping.rect_to_box(screen_min, screen_max)
         if box is None:
             raise InputError("the dragged box misses the frame or is too thin; drag again")
         self.controller.place_box(box)
-        if not letterbox.rect_inside(screen_min, screen_max):
+        if not mapping.rect_inside(screen_min, screen_max):
             self.controller.message += " The drag passed the frame's edge: the box is cut there."
 
     def seek(self, frame_index: int) -> None:
@@ -302,6 +337,7 @@ class Tab:
         """Show the per-target map panels only when chosen."""
         shown = self.panels.display.maps.value == MAPS_PANELS
         self.panels.quiet.set(self.panels.display.maps_folder, "visible", shown)
+        self.panels.quiet.set(self.panels.display.maps_hint, "visible", not shown)
         self.display.wake(canvas=True)
 
     # -- after each command and frame ---------------------------------------------------------
@@ -329,8 +365,10 @@ class Tab:
             self._command_done()
 
     def _frame_changed(self) -> None:
-        show_frame(self.panels, self.controller)
         now = time.monotonic()
+        if now >= self._slider_shown + SLIDER_PERIOD:  # the Frame slider follows playback
+            show_frame(self.panels, self.controller)
+            self._slider_shown = now
         if now >= self._table_shown + TABLE_PERIOD:  # the Targets table follows playback
             show_targets(self.panels, self.controller)
             self._table_shown = now
@@ -347,6 +385,14 @@ class Tab:
         rewritten when it is done."""
         status = self.panels.status
         self.panels.quiet.set(status, "content", f"⏳ **Working**: {what}\n\n{status.content}")
+
+    def show_startup(self, notice: str) -> None:
+        """Show what the server prepares before a box can track ('' hides the notice)."""
+        startup, quiet = self.panels.startup, self.panels.quiet
+        if startup.content != notice:
+            quiet.set(startup, "content", notice)
+        if startup.visible != bool(notice):
+            quiet.set(startup, "visible", bool(notice))
 
     def _hint(self, message: str) -> None:
         """Say how to use the canvas, over it (a note) and in the status line."""
@@ -391,6 +437,8 @@ class Tab:
 
     def close(self) -> None:
         """Stop the threads and finish the recording (the tab's browser went away)."""
+        if self._stop_notice is not None:
+            self._stop_notice()
         try:
             self.worker.close()
             self.live.halt()

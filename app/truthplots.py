@@ -8,9 +8,10 @@ import numpy as np
 import viser
 import viser.uplot
 
-from app.groundtruth import TruthView
+from app.groundtruth import PoseErrors, TruthView
 from app.plots import (
     CHART_PADDING,
+    EMPTY_SCALES,
     chart_data,
     cursor_series,
     line_series,
@@ -20,20 +21,50 @@ from app.plots import (
 from autotrack.evaluation.metrics import PRECISION_SCORE_THRESHOLD
 
 
-def scores_text(truth: TruthView | None) -> str:
-    """The scores as the tab shows them (markdown)."""
+def scores_text(truth: TruthView | None, truths: tuple[TruthView, ...] = ()) -> str:
+    """The scores as the tab shows them (markdown): the charted target's, and with several
+    targets scored (the demo's landmarks) a table of them all."""
     if truth is None:
-        return "This sequence has no ground truth (groundtruth_rect.txt)."
+        return "This sequence has no ground-truth boxes (groundtruth_rect.txt or groundtruth/)."
     if truth.frames is None:
         return (
-            "No target to score yet: *Targets → Start from ground truth* starts one from this "
-            "frame's ground-truth box (or the first target drawn is scored)."
+            "No target to score yet: *Targets → Start from ground truth* starts from this "
+            "frame's ground-truth boxes (or the targets drawn are scored)."
         )
     first, last = truth.frames
-    return (
+    text = (
         f"**{truth.target_id}** against the ground truth, frames {first + 1}-{last + 1} "
         f"({last - first + 1} frames): **P@20 = {truth.precision:.3f}**, "
         f"**AUC = {truth.auc:.3f}** (as `autotrack track` scores the same frames)."
+    )
+    scored = [view for view in truths if view.frames is not None]
+    if len(scored) < 2:
+        return text
+    rows = ["| target | ground truth | frames | P@20 | AUC |", "|---|---|---|---|---|"]
+    for view in scored:
+        first, last = view.frames
+        rows.append(
+            f"| {view.target_id} | {view.label} | {first + 1}-{last + 1} | "
+            f"{view.precision:.3f} | {view.auc:.3f} |"
+        )
+    charted = "the charts show the target chosen in *Drag draws*, else the first"
+    return f"{text}\n\n" + "\n".join(rows) + f"\n\n({charted}.)"
+
+
+def pose_error_text(errors: PoseErrors | None) -> str:
+    """The camera's error against poses_gt.tum (markdown; '' without one)."""
+    if errors is None:
+        return ""
+    if not errors.frames:
+        return "**Camera pose** vs poses_gt.tum: no trusted pose yet."
+    rpe = (
+        f"RPE over 1 s **{errors.rpe_m * 1000:.1f} mm**, {errors.rpe_deg:.2f}°"
+        if np.isfinite(errors.rpe_m)
+        else "RPE once poses span a second"
+    )
+    return (
+        f"**Camera pose** vs poses_gt.tum over {errors.frames} trusted frames: "
+        f"ATE **{errors.ate_m * 1000:.1f} mm**, {errors.ate_deg:.2f}° (RMS) · {rpe}."
     )
 
 
@@ -44,6 +75,7 @@ class TruthPlots:
         self.gui = gui
         with container:
             self.scores = gui.add_markdown(scores_text(None))
+            self.poses = gui.add_markdown("")
             empty = np.zeros(1)
             frame = viser.uplot.Series(label="frame")
             self.error = gui.add_uplot(
@@ -57,6 +89,7 @@ class TruthPlots:
                 title="Centre error (px)",
                 aspect=2.0,
                 padding=CHART_PADDING,
+                scales=EMPTY_SCALES,
             )
             self.iou = gui.add_uplot(
                 data=(empty, empty, empty),
@@ -64,16 +97,27 @@ class TruthPlots:
                 title="Overlap (IoU)",
                 aspect=2.0,
                 padding=CHART_PADDING,
+                scales=EMPTY_SCALES,
             )
         self._scales: tuple | None = None
         self.last_text = ""
 
-    def update(self, truth: TruthView | None, cursor: int) -> None:
-        """Show `truth`'s scores and per-frame values up to its last scored frame."""
-        text = scores_text(truth)
+    def update(
+        self,
+        truth: TruthView | None,
+        cursor: int,
+        truths: tuple[TruthView, ...] = (),
+        pose_errors: PoseErrors | None = None,
+    ) -> None:
+        """Show the scores of `truths`, `truth`'s per-frame values up to its last scored
+        frame, and the camera's pose error."""
+        text = scores_text(truth, truths)
         if text != self.last_text:
             self.scores.content = text
             self.last_text = text
+        poses = pose_error_text(pose_errors)
+        if poses != self.poses.content:
+            self.poses.content = poses
         if truth is None or truth.frames is None:
             return
         count = max(truth.frames[1], cursor) + 1

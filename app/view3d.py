@@ -13,12 +13,18 @@ import numpy as np
 import viser
 from scipy.spatial.transform import Rotation
 
+from app.groundtruth import PoseErrors
 from app.views import PoseView
 from autotrack.localization.scene import Scene
 
 VALID_COLOUR = (40, 180, 60)
 INVALID_COLOUR = (220, 40, 40)
-GT_COLOUR = (120, 120, 120)
+GT_COLOUR = (60, 130, 240)
+"""Blue, drawn wider than the green estimate under it, so an estimate on the ground truth
+leaves a blue rim either side instead of hiding it."""
+GT_THICKNESS = 7.0
+TRAJECTORY_THICKNESS = 2.5
+LANDMARK_COLOUR = (255, 140, 0)
 UP_AXIS = np.array([0.0, 0.0, 1.0])
 """The scenes' world frame has +z up."""
 DEFAULT_FOV = np.radians(50.0)
@@ -134,7 +140,7 @@ class SceneView:
             self.api.add_icosphere(
                 f"/studio/landmarks/{landmark.id}",
                 radius=0.4 * self._scale,
-                color=(255, 140, 0),
+                color=LANDMARK_COLOUR,
                 position=tuple(landmark.position),
             )
             self.api.add_label(
@@ -147,8 +153,11 @@ class SceneView:
                 "/studio/trajectory_gt",
                 segments_with_gaps(range(len(gt_positions)), gt_positions),
                 colors=GT_COLOUR,
-                thickness=2.0,
+                thickness=GT_THICKNESS,
                 thickness_units="screen",
+            )
+            self.api.add_label(
+                "/studio/trajectory_gt/label", "ground truth", position=tuple(gt_positions[0])
             )
 
     def viewpoint(
@@ -190,7 +199,7 @@ class SceneView:
                 "/studio/trajectory",
                 segments,
                 colors=VALID_COLOUR,
-                thickness=3.0,
+                thickness=TRAJECTORY_THICKNESS,
                 thickness_units="screen",
             )
         else:
@@ -224,3 +233,32 @@ class SceneView:
         else:
             self.api.remove_by_name("/studio/camera")
             self.frustum_state = "none" if pose is None else "invalid"
+
+
+def _swatch(colour: tuple[int, int, int], text: str) -> str:
+    css = "#{:02x}{:02x}{:02x}".format(*colour)
+    return f'<span style="color:{css}">■</span> {text}'
+
+
+def view3d_legend(has_truth: bool, errors: PoseErrors | None) -> str:
+    """The 3-D view's legend (what each colour is) and, with ground-truth poses, the estimate's
+    error against them: ATE (RMS over the trusted frames so far) and RPE over one second."""
+    items = [
+        _swatch(VALID_COLOUR, "estimated trajectory and camera"),
+        _swatch(INVALID_COLOUR, "camera not trusted"),
+        _swatch(LANDMARK_COLOUR, "landmarks"),
+    ]
+    if has_truth:
+        items.insert(1, _swatch(GT_COLOUR, "ground truth (wider, under the estimate)"))
+    text = "**3-D view**: " + " · ".join(items)
+    if errors is None or not errors.frames:
+        return text + ("\n\nPose error: no trusted pose yet." if has_truth else "")
+    rpe = (
+        f"RPE {errors.rpe_m * 1000:.1f} mm/s, {errors.rpe_deg:.2f}°/s"
+        if np.isfinite(errors.rpe_m)
+        else "RPE after one second of poses"
+    )
+    return (
+        f"{text}\n\n**Pose error** vs poses_gt.tum over {errors.frames} frames: "
+        f"ATE {errors.ate_m * 1000:.1f} mm, {errors.ate_deg:.2f}° · {rpe}"
+    )

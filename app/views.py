@@ -13,7 +13,7 @@ import numpy as np
 
 from app.browser_text import markdown_literal
 from app.canvas import TargetDrawing, target_colour
-from app.groundtruth import TruthView
+from app.groundtruth import TruthPoses, TruthView
 from autotrack.errors import SessionError
 from autotrack.localization.smoothing import SmootherParams, smoothed_positions
 from autotrack.pipeline import Pipeline, TrackedTarget
@@ -90,7 +90,15 @@ class FrameView:
     status: str
     """The status line (markdown)."""
     truth: TruthView | None = None
-    """The ground truth and the live scores against it (None: the sequence has none)."""
+    """The ground truth the Ground truth tab charts (None: the sequence has none)."""
+    truths: tuple[TruthView, ...] = ()
+    """Every target's ground truth on this frame and its live scores (one per landmark with
+    ground truth, or the one target of a benchmark sequence)."""
+    truth_poses: TruthPoses | None = None
+    """The ground-truth camera poses (the display computes the pose error from them)."""
+    playing: bool = False
+    """Whether playback (or a live run) goes on past this frame (the display then sends less
+    often what the browser spends the most drawing)."""
 
 
 def frame_view(
@@ -100,6 +108,10 @@ def frame_view(
     message: str,
     play_seconds: np.ndarray | None = None,
     truth: TruthView | None = None,
+    *,
+    truths: tuple[TruthView, ...] = (),
+    truth_poses: TruthPoses | None = None,
+    playing: bool = False,
 ) -> FrameView:
     """The snapshot of `run` at `frame_index` (`selected`: the target drawn thicker;
     `message`: the tab's last message, under the status line; `play_seconds`: the in-app time
@@ -158,6 +170,9 @@ def frame_view(
             rates_text(run.frame_seconds, play_seconds, frame_index),
         ),
         truth=truth,
+        truths=truths or (() if truth is None else (truth,)),
+        truth_poses=truth_poses,
+        playing=playing,
     )
 
 

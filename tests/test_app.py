@@ -231,16 +231,18 @@ def test_overlay_draws_the_map_inside_the_search_region_only() -> None:
     values = np.zeros((25, 25), np.float32)
     values[5, 20] = 1.0
     result = _result(values)
-    frame = np.full((120, 160, 3), 128, np.uint8)
+    frame = np.full((120, 640, 3), 128, np.uint8)
     drawing = TargetDrawing(label="T1", colour=(255, 0, 0), box=result.box, result=result)
 
     plain = draw_overlays(frame, [drawing], "none")
     mapped = draw_overlays(frame, [drawing], "response")
 
     changed = np.any(mapped != plain, axis=2)
+    assert changed[:40, 420:].any()  # the colour scale's legend, top right
+    changed[:40, 420:] = False
     rows, cols = np.nonzero(changed)
     assert rows.min() >= 15 and rows.max() < 65 and cols.min() >= 20 and cols.max() < 70
-    assert np.array_equal(frame, np.full((120, 160, 3), 128, np.uint8))  # input untouched
+    assert np.array_equal(frame, np.full((120, 640, 3), 128, np.uint8))  # input untouched
     # The peak lies in cell (5, 20) of a 50-px search region on a 25-cell map.
     assert peak_position(result) == pytest.approx((20.0 + 20.5 * 2.0, 15.0 + 5.5 * 2.0))
 
@@ -323,10 +325,10 @@ def test_the_cursor_line_stands_at_the_current_frame() -> None:
     x, values, line = with_cursor(5, [np.arange(5, dtype=float) * 10], 2, (-1.0, 7.0))
     assert np.all(np.diff(x) > 0) and len(x) == 5 + len(CURSOR_OFFSETS)
     at = np.flatnonzero(np.isfinite(line))
-    np.testing.assert_allclose(x[at], 2 + np.array(CURSOR_OFFSETS))
+    np.testing.assert_allclose(x[at], 3 + np.array(CURSOR_OFFSETS))  # frame 3, 1-based
     np.testing.assert_array_equal(line[at], [-1.0, 7.0])
     np.testing.assert_array_equal(values[at], [20.0, 20.0])  # the series do not break there
-    np.testing.assert_array_equal(values[np.isin(x, np.arange(5))], np.arange(5) * 10.0)
+    np.testing.assert_array_equal(values[np.isin(x, np.arange(1, 6))], np.arange(5) * 10.0)
 
 
 def test_the_cursor_line_stays_in_the_x_range_on_the_last_frame() -> None:
@@ -337,7 +339,8 @@ def test_the_cursor_line_stays_in_the_x_range_on_the_last_frame() -> None:
         low, high = x_range(last, count)
         drawn = [at for at, value in zip(x, line, strict=True) if value is not None]
         assert len(drawn) == len(CURSOR_OFFSETS) and low <= min(drawn) and max(drawn) <= high
-    assert x_range(10, 60) == (0.0, 50.0) and x_range(59, 60)[1] < 59.01
+    assert x_range(10, 60) == (1.0, 50.0) and x_range(59, 60)[1] < 60.01
+    assert x_range(49, 200) == (1.0, 100.0)  # frame 50 is shown with the cursor after it
 
 
 def test_local_variation_colour_scale_ignores_a_few_extreme_values() -> None:
@@ -823,17 +826,35 @@ def test_download_buttons_send_tracks_poses_and_the_session(studio) -> None:
     assert tab.wait_idle()
 
     session = tab.panels.session
-    for button in (session.download_tracks, session.download_poses, session.download_mcap):
+    buttons = (
+        session.download_tracks,
+        session.download_poses,
+        session.download_mot,
+        session.download_cvat,
+        session.download_mcap,
+    )
+    for button in buttons:
         _click(button)
     assert tab.wait_idle()
 
     path = tab.controller.run.session_path
     names = [name for name, _ in channel.downloads]
-    assert names == [f"{path.stem}_tracks.zip", f"{path.stem}_poses.tum", path.name]
+    assert names == [
+        f"{path.stem}_tracks.zip",
+        f"{path.stem}_poses.tum",
+        f"{path.stem}_mot.txt",
+        f"{path.stem}_cvat.xml",
+        path.name,
+    ]
     with zipfile.ZipFile(io.BytesIO(channel.downloads[0][1])) as archive:
         names = sorted(archive.namelist())  # T<n>_<landmark>.txt, then tracks.csv
         assert [name.split("_")[0] for name in names] == ["T1", "T2", "T3", "T4", "tracks.csv"]
-    assert channel.downloads[2][1][:8] == b"\x89MCAP0\r\n"
+    # MOT: frame, id, x, y, w, h, score, ... one row per target and frame (1-based frames).
+    mot_rows = [row.split(",") for row in channel.downloads[2][1].decode().splitlines()]
+    assert len(mot_rows) == 4 * 6 and {row[0] for row in mot_rows} == {str(k) for k in range(1, 7)}
+    cvat = channel.downloads[3][1].decode()
+    assert "<original_size>" in cvat and "<width>960</width>" in cvat and cvat.count("<track ") == 4
+    assert channel.downloads[4][1][:8] == b"\x89MCAP0\r\n"
 
 
 def test_two_tabs_keep_separate_runs_and_cannot_reopen_a_live_session(studio) -> None:
@@ -1273,3 +1294,123 @@ def test_show_ground_truth_redraws_the_canvas_at_once(tmp_path: Path) -> None:
         assert not [note for note, error in channel.notes if error]
     finally:
         studio.stop()
+
+
+def test_the_tracker_choice_applies_or_offers_a_restart_with_it(studio) -> None:
+    tab, _ = _open_tab(studio)
+    sequence, restart = tab.panels.sequence, tab.panels.sequence.restart
+    _set(sequence.preset, "autotrack+")  # no target yet: the run takes it at once
+    assert tab.wait_idle()
+    assert tab.controller.run.params.name == "autotrack+" and not restart.visible
+    _drag(tab, _demo_boxes()["A"])
+    assert tab.controller.run.params.name == "autotrack+"
+    _set(sequence.preset, "strcf")  # T1 tracks with autotrack+: the page offers a restart
+    assert tab.wait_idle()
+    assert restart.visible and restart.label == "Restart with strcf"
+    assert tab.controller.run.params.name == "autotrack+"
+    assert "Restart with strcf" in tab.controller.message
+    _click(restart)
+    assert tab.wait_idle()
+    assert tab.controller.run.params.name == "strcf" and not restart.visible
+    assert sequence.preset.value == "strcf" and not tab.controller.run.targets
+
+
+def test_while_playing_the_display_sends_less_of_what_the_browser_draws() -> None:
+    from app.display import GUI_FPS, PLAYING_SLOW_FPS, SLOW_FPS, send_periods
+
+    assert send_periods(False, True, 0.2) == (1.0 / GUI_FPS, 1.0 / SLOW_FPS)  # paused: all
+    assert send_periods(True, True, 0.2) == (0.2, 1.0 / PLAYING_SLOW_FPS)  # the canvas's rate
+    assert send_periods(True, False, 0.2) == (1.0 / GUI_FPS, 1.0 / PLAYING_SLOW_FPS)  # 3-D
+
+
+def test_the_frame_slider_follows_playback_at_a_few_updates_a_second(studio) -> None:
+    from app.tab import SLIDER_PERIOD
+
+    tab, _ = _open_tab(studio)
+    slider, controller = tab.panels.playback.frame, tab.controller
+    tab.worker.submit(controller.load_boxes_json)
+    assert tab.wait_idle()
+    writes: list[float] = []
+    original = tab.panels.quiet.set
+
+    def counted(handle, attribute, value) -> None:
+        if handle is slider and attribute == "value":
+            writes.append(time.monotonic())
+        original(handle, attribute, value)
+
+    tab.panels.quiet.set = counted
+    _set(tab.panels.playback.unlimited, True)
+    started = time.monotonic()
+    _click(tab.panels.playback.play)
+    _wait_for(
+        lambda: not controller.playing and controller.cursor == controller.run.frame_count - 1, 120
+    )
+    assert tab.wait_idle()
+    seconds = time.monotonic() - started
+    assert len(writes) <= seconds / SLIDER_PERIOD + 3  # not one a frame
+    assert slider.value == controller.run.frame_count  # the last frame once it stops
+
+
+def test_target_colours_are_distinct_and_none_is_the_aberrant_red() -> None:
+    from app.canvas import ABERRANT, TARGET_COLOURS
+
+    colours = np.array(TARGET_COLOURS, dtype=float)
+    assert len({tuple(c) for c in TARGET_COLOURS}) == len(TARGET_COLOURS)
+    assert np.linalg.norm(colours - np.array(ABERRANT), axis=1).min() > 150
+    assert not any(r > 200 and g < 120 and b < 120 for r, g, b in TARGET_COLOURS)  # no red
+
+
+def test_the_response_overlay_uses_a_robust_scale_and_the_chosen_opacity() -> None:
+    values = np.random.default_rng(2).uniform(0.0, 0.1, (25, 25)).astype(np.float32)
+    values[5, 20] = 50.0  # one extreme peak: a min-max scale would leave the rest dark blue
+    result = _result(values)
+    frame = np.full((120, 160, 3), 128, np.uint8)
+    drawing = TargetDrawing(label="T1", colour=(64, 200, 255), box=result.box, result=result)
+    plain = draw_overlays(frame, [drawing], "none").astype(int)
+    faint = draw_overlays(frame, [drawing], "response", map_opacity=0.2).astype(int)
+    strong = draw_overlays(frame, [drawing], "response", map_opacity=0.9).astype(int)
+    region = (slice(30, 64), slice(22, 68))  # inside the search region, below the legend
+    faint_change = np.abs(faint[region] - plain[region]).mean()
+    strong_change = np.abs(strong[region] - plain[region]).mean()
+    assert strong_change > 3 * faint_change > 0
+    # Spread over the colour scale: the region's colours vary, not one flat blue.
+    assert strong[region].reshape(-1, 3).std(axis=0).max() > 30
+
+
+def test_play_needs_frames_and_the_maps_hint_goes_once_the_panels_are_chosen(studio) -> None:
+    from app.panels import MAPS_PANELS, MAPS_RESPONSE
+
+    tab, _ = _open_tab(studio)
+    playback, display = tab.panels.playback, tab.panels.display
+    assert not playback.play.disabled and not playback.step.disabled
+    tab.worker.submit(tab.controller.close_run)  # nothing open: nothing to play
+    assert tab.wait_idle()
+    assert playback.play.disabled and playback.step.disabled and playback.step_back.disabled
+    tab.worker.submit(tab.controller.open_initial)
+    assert tab.wait_idle() and not playback.play.disabled
+    assert display.maps_hint.visible
+    _set(display.maps, MAPS_PANELS)
+    assert tab.wait_idle()
+    assert not display.maps_hint.visible and display.maps_folder.visible
+    _set(display.maps, MAPS_RESPONSE)
+    assert tab.wait_idle() and display.maps_hint.visible
+
+
+def test_a_reloaded_page_points_to_the_session_its_tab_recorded(studio) -> None:
+    first, _ = _open_tab(studio, tab_id=1, browser="alice")
+    assert first.controller.suggested_session is None  # nothing recorded before
+    _drag(first, _demo_boxes()["A"])
+    _set(first.panels.playback.frame, 5)
+    assert first.wait_idle()
+    recorded = first.controller.run.session_path
+    studio.close_tab(1)  # a reload closes the tab ...
+
+    again, _ = _open_tab(studio, tab_id=2, browser="alice")  # ... and opens a new one
+    assert again.controller.suggested_session == recorded.name
+    assert again.panels.session.sessions.value == recorded.name
+    assert "Reopen and continue" in again.controller.message
+    _click(again.panels.session.reopen)
+    assert again.wait_idle()
+    assert again.controller.cursor == 4 and list(again.controller.run.targets) == ["T1"]
+    other, _ = _open_tab(studio, tab_id=3, browser="bob")  # another browser: not its session
+    assert other.controller.suggested_session is None

@@ -792,9 +792,19 @@ def test_start_from_ground_truth_scores_like_the_cli(tmp_path: Path, capsys) -> 
     assert truth.box == pytest.approx(tuple(read_boxes(sequence / "groundtruth_rect.txt")[-1]))
 
 
-def test_ground_truth_needs_a_box_on_the_frame(controller) -> None:
-    with pytest.raises(InputError, match="no groundtruth_rect.txt"):
-        controller.start_from_truth()  # the demo has none
+def test_ground_truth_needs_a_box_on_the_frame(tmp_path: Path) -> None:
+    plain = tmp_path / "plain"
+    shutil.copytree(DEMO / "img", plain / "img")  # the demo's frames without its ground truth
+    config = AppConfig(sequence=plain, sessions_dir=tmp_path / "sessions", demo_dir=DEMO)
+    config.sessions_dir.mkdir()
+    controller = TabController(config, (plain,), RecordingRegistry(), 1)
+    controller.open_initial()
+    try:
+        assert not controller.has_truth
+        with pytest.raises(InputError, match="no groundtruth_rect.txt or groundtruth/"):
+            controller.start_from_truth()
+    finally:
+        controller.close()
 
 
 def test_playing_a_cut_video_stops_at_its_last_frame(tmp_path: Path) -> None:
@@ -818,3 +828,57 @@ def test_playing_a_cut_video_stops_at_its_last_frame(tmp_path: Path) -> None:
         assert 10 < controller.run.frame_count < 60
     finally:
         controller.close()
+
+
+def test_the_tracker_chosen_before_the_first_target_is_the_one_it_tracks_with(
+    tmp_path: Path,
+) -> None:
+    from autotrack.params import preset
+    from autotrack.sessions import open_session
+
+    if not GULL1.is_dir():
+        pytest.skip(f"{GULL1} is missing (the shared benchmark data)")
+    sequence = _first_frames(GULL1, tmp_path / "Gull1", 6)
+    config = AppConfig(
+        sequence=sequence, sessions_dir=tmp_path / "sessions", demo_dir=DEMO, tracker_threads=1
+    )
+    config.sessions_dir.mkdir()
+    controller = TabController(config, (sequence,), RecordingRegistry(), 1)
+    controller.open_initial()
+    try:
+        assert controller.run.params == preset("autotrack")
+        controller.step(2)
+        controller.choose_preset("autotrack+")  # no target yet: the run follows at once
+        assert controller.run.params == preset("autotrack+") and controller.cursor == 2
+        assert not controller.preset_pending
+        controller.start_from_truth()
+        controller.step(1)
+        assert controller.run.params == preset("autotrack+")
+        session_path = controller.run.session_path
+        controller.close_run()
+        assert open_session(session_path).tracker_params() == preset("autotrack+")
+    finally:
+        controller.close()
+
+
+def test_a_tracker_chosen_with_targets_says_it_needs_a_restart_and_restarts(controller) -> None:
+    from autotrack.params import preset
+
+    controller.place_box(tuple(_demo_boxes()["A"]))
+    controller.step(1)
+    first_session = controller.run.session_path
+    controller.choose_preset("strcf")
+    assert controller.preset_pending and controller.run.params == preset("autotrack")
+    assert "Restart with strcf" in controller.message  # said plainly, not silently ignored
+    controller.place_box(tuple(_demo_boxes()["B"]))  # a second target keeps the run's own
+    assert controller.run.params == preset("autotrack") and "Restart with strcf" in (
+        controller.message
+    )
+    controller.restart_with_preset()
+    assert controller.run.params == preset("strcf") and not controller.preset_pending
+    assert controller.cursor == 1 and not controller.run.targets
+    assert first_session.name in controller.session_choices  # the earlier session is kept
+    controller.place_box(tuple(_demo_boxes()["A"]))
+    assert controller.run.params == preset("strcf")
+    with pytest.raises(InputError, match="already tracks with strcf"):
+        controller.restart_with_preset()
