@@ -5,8 +5,9 @@
   that module changes (an upgrade, an edit), and runs it silently. So `configure_numba_cache`
   points numba at a folder named by a digest of the package's sources and numba's version,
   `kernels-<digest>` inside `$NUMBA_CACHE_DIR` when that is set and writable, otherwise inside
-  `cache_root() / "numba"` (never beside the source, which may be read-only): any change to
-  any module, or another numba, gives a new folder and a fresh compile (~10 s once); the
+  the tool's cache folder (`autotrack.userdirs.cache_root() / "numba"`; never beside the
+  source, which may be read-only): any change to any module, or another numba, gives a new
+  folder and a fresh compile (~10 s once); the
   second process of the same sources loads instead of recompiling. The three newest such
   folders are kept, and any other that nothing wrote to in the last hour is removed.
   $NUMBA_CACHE_DIR is process-wide: another library's numba kernels in the same process are
@@ -25,48 +26,18 @@ import io
 import os
 import shutil
 import sys
-import tempfile
 import time
 from collections.abc import Callable
 from importlib import metadata
 from pathlib import Path
 from typing import TYPE_CHECKING
 
+from autotrack.userdirs import cache_root, is_writable_dir
+
 if TYPE_CHECKING:
     import numpy as np
 
-CACHE_ENV = "AUTOTRACK_CACHE_DIR"
-"""Environment variable overriding the cache folder."""
-
 PACKAGE_DIR = Path(__file__).resolve().parent
-
-
-def is_writable_dir(folder: Path) -> bool:
-    """True when `folder` exists (or can be created) and a file can be written in it."""
-    try:
-        folder.mkdir(parents=True, exist_ok=True)
-        with tempfile.NamedTemporaryFile(dir=folder, prefix=".probe-"):
-            pass
-        return True
-    except OSError:
-        return False
-
-
-def cache_root() -> Path:
-    """The user cache folder: $AUTOTRACK_CACHE_DIR, else $XDG_CACHE_HOME/autotrack, else
-    ~/.cache/autotrack; a temporary folder when none of them is writable."""
-    configured = os.environ.get(CACHE_ENV)
-    if configured:
-        candidates = [Path(configured).expanduser()]
-    else:
-        base = os.environ.get("XDG_CACHE_HOME") or str(Path.home() / ".cache")
-        candidates = [Path(base).expanduser() / "autotrack"]
-    candidates.append(Path(tempfile.gettempdir()) / f"autotrack-cache-{os.getuid()}")
-    for folder in candidates:
-        if is_writable_dir(folder):
-            return folder
-    return candidates[-1]
-
 
 KERNEL_FOLDER_PREFIX = "kernels-"
 KEPT_KERNEL_FOLDERS = 3

@@ -31,7 +31,7 @@ def test_track_writes_one_based_boxes_and_prints_scores(sequence_folder, tmp_pat
     out = tmp_path / "boxes.txt"
     assert main(["track", str(sequence_folder), "--out", str(out), "--quiet"]) == 0
     printed = capsys.readouterr().out
-    assert "frames: 20" in printed and "fps:" in printed
+    assert "frames: 20 · start-up " in printed and " fps over 17 frames" in printed
     assert "precision@20px: 1.000" in printed and "success AUC:" in printed
     boxes = read_boxes(out)  # read back to 0-based
     truth = read_boxes(sequence_folder / "groundtruth_rect.txt")

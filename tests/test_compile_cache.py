@@ -11,14 +11,14 @@ import time
 import numpy as np
 import pytest
 
-from autotrack import compile_cache
+from autotrack import compile_cache, userdirs
 from tests.conftest import shared_sequence_dir
 
 
 @pytest.fixture
 def clean_env(monkeypatch, tmp_path):
     monkeypatch.delenv("NUMBA_CACHE_DIR", raising=False)
-    monkeypatch.setenv(compile_cache.CACHE_ENV, str(tmp_path / "user-cache"))
+    monkeypatch.setenv(userdirs.CACHE_ENV, str(tmp_path / "user-cache"))
     return tmp_path
 
 
@@ -120,7 +120,7 @@ def test_spectrum_transform_returns_a_new_spectrum_each_call():
 def test_second_process_loads_the_cached_kernels(tmp_path):
     """A fresh process with an empty cache folder writes the kernels; the next one reuses them."""
     env = dict(os.environ, NUMBA_CACHE_DIR=str(tmp_path / "numba"))
-    env[compile_cache.CACHE_ENV] = str(tmp_path / "cache")
+    env[userdirs.CACHE_ENV] = str(tmp_path / "cache")
     script = (
         "import numpy as np; from autotrack import AutoTrack, preset;"
         "f = np.zeros((64, 96, 3), np.uint8); f[20:40, 30:60] = 200;"
@@ -195,7 +195,7 @@ def test_second_process_loads_kernels_without_numba_target_refresh(tmp_path):
     table is kept in the user cache by the first process."""
     folder = shared_sequence_dir("DTB70", "Surfing06")
     env = dict(os.environ, NUMBA_CACHE_DIR=str(tmp_path / "numba"))
-    env[compile_cache.CACHE_ENV] = str(tmp_path / "cache")
+    env[userdirs.CACHE_ENV] = str(tmp_path / "cache")
     watched = [*_NUMBA_TARGET_MODULES, *_SCIPY_SUBPACKAGES]
     command = [sys.executable, "-c", _TRACK_AND_REPORT, str(folder), *watched]
     runs = []
