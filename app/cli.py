@@ -61,7 +61,6 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument(
         "--sessions",
         type=Path,
-        default=None,
         metavar="DIR",
         help="folder for session recordings and uploads (default: the user's data folder, "
         "$XDG_DATA_HOME/autotrack/sessions or ~/.local/share/autotrack/sessions)",
