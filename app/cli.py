@@ -1,14 +1,14 @@
 """`autotrack app [SEQUENCE]`: the browser app (viser) to annotate, track and debug.
 
 The library's `autotrack` command finds this sub-command through the `autotrack.commands`
-entry-point group (pyproject.toml), so the library never imports the app.
+entry-point group (pyproject.toml), so the library never imports the app. This module imports
+only the library and the standard library: `autotrack --help` works on a core install, and
+`autotrack app` there says which extra to install.
 """
 
 from __future__ import annotations
 
 import argparse
-import os
-import shutil
 import signal
 import socket
 import sys
@@ -16,9 +16,10 @@ import threading
 from dataclasses import replace
 from pathlib import Path
 
-from app.config import AppConfig
 from autotrack.errors import InputError
+from autotrack.extras import require_extra
 from autotrack.params import PRESETS
+from autotrack.userdirs import default_sessions_dir
 
 LOOPBACK_HOSTS = ("127.0.0.1", "localhost", "::1")
 
@@ -60,8 +61,9 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument(
         "--sessions",
         type=Path,
-        default=Path("sessions"),
-        help="folder for session recordings and uploads (default ./sessions)",
+        metavar="DIR",
+        help="folder for session recordings and uploads (default: the user's data folder, "
+        "$XDG_DATA_HOME/autotrack/sessions or ~/.local/share/autotrack/sessions)",
     )
     parser.add_argument(
         "--share-sessions",
@@ -172,34 +174,9 @@ def free_port(host: str, first: int) -> int:
     raise InputError(f"--port {first}: port {span} on {host} is taken; give another --port")
 
 
-def rendered_demo() -> Path:
-    """The demo rendered into the user's cache folder (installs without the repo's static/).
-
-    The renderer is deterministic, so this is the same sequence as static/demo; it is rendered
-    once (a few seconds) and reused.
-    """
-    from autotrack.synthetic.testbed import generate_demo
-
-    cache = Path(os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache")
-    demo = cache / "autotrack-studio" / "demo"
-    if not (demo / "scene.json").is_file():
-        print(f"rendering the demo into {demo} (first launch only)...", flush=True)
-        partial = demo.with_name("demo.partial")
-        shutil.rmtree(partial, ignore_errors=True)
-        try:
-            generate_demo(partial)
-            shutil.rmtree(demo, ignore_errors=True)
-            partial.rename(demo)
-        except OSError as error:
-            raise InputError(
-                f"the embedded demo is missing and cannot be rendered into {demo}: {error}; "
-                "give a SEQUENCE to open"
-            ) from error
-    return demo
-
-
 def run(args: argparse.Namespace) -> int:
     """Start the app and serve until Ctrl-C or SIGTERM."""
+    require_extra("viser", "app", "autotrack app")
     if not 0 <= args.port <= 65535:
         raise InputError(f"--port must be 0..65535, got {args.port}")
     if not args.canvas_fps > 0:
@@ -210,14 +187,15 @@ def run(args: argparse.Namespace) -> int:
     check_bindable(args.host)
     port = free_port(args.host, args.port)
 
-    from app.server import StudioServer  # viser loads only when the app starts
+    from app.config import AppConfig  # the app's modules (and viser) load only when it starts
+    from app.server import StudioServer
 
     config = AppConfig(
         sequence=None if args.sequence is None else args.sequence.resolve(),
         scene=None if args.scene is None else args.scene.resolve(),
         host=args.host,
         port=port,
-        sessions_dir=args.sessions,
+        sessions_dir=default_sessions_dir() if args.sessions is None else args.sessions,
         allowed_roots=tuple(roots),
         tracker_preset=args.preset,
         canvas_fps=args.canvas_fps,
@@ -228,7 +206,7 @@ def run(args: argparse.Namespace) -> int:
     if args.no_token:
         config = replace(config, token=None)
     if config.sequence is None and not config.demo_dir.is_dir():
-        config = replace(config, demo_dir=rendered_demo())
+        raise InputError(f"the embedded demo is missing from {config.demo_dir}: give a SEQUENCE")
     studio = StudioServer(config)
     print(f"AutoTrack Studio: {studio.url}", flush=True)
     if args.host not in LOOPBACK_HOSTS:

@@ -7,8 +7,18 @@ from pathlib import Path
 
 from app.access import new_token
 from app.paths import UploadLimits, normalise_roots
+from autotrack.userdirs import default_sessions_dir
 
-DEMO_DIR = Path(__file__).resolve().parents[1] / "static" / "demo"
+
+def _embedded_demo() -> Path:
+    """The demo inside the installed package (the wheel maps the repository's static/demo to
+    the package's demo/, pyproject.toml), else the source tree's static/demo."""
+    package = Path(__file__).resolve().parent
+    installed = package / "demo"
+    return installed if installed.is_dir() else package.parent / "static" / "demo"
+
+
+DEMO_DIR = _embedded_demo()
 """The embedded demo sequence (img/, scene.json, boxes.json, poses_gt.tum)."""
 
 
@@ -24,8 +34,9 @@ class AppConfig:
     """Interface to bind; 127.0.0.1 keeps the app local to this machine."""
     port: int = 8080
     """Port to try first (viser moves on to the next free one)."""
-    sessions_dir: Path = Path("sessions")
-    """Where session recordings (and uploads, under uploads/) are written."""
+    sessions_dir: Path = field(default_factory=default_sessions_dir)
+    """Where session recordings (and uploads, under uploads/) are written (default: the user's
+    data folder, `autotrack.userdirs`)."""
     allowed_roots: tuple[Path, ...] = ()
     """Folders a browser user may open sequences and scenes from (plus the demo and uploads)."""
     demo_dir: Path = DEMO_DIR

@@ -19,3 +19,7 @@ class SceneError(AutoTrackError):
 
 class SessionError(AutoTrackError):
     """A session recording cannot be written or read."""
+
+
+class MissingExtraError(AutoTrackError):
+    """An optional part of the package is not installed (`autotrack.extras`)."""

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import re
 import subprocess
 import sys
 from pathlib import Path
@@ -31,13 +32,31 @@ def test_track_writes_one_based_boxes_and_prints_scores(sequence_folder, tmp_pat
     out = tmp_path / "boxes.txt"
     assert main(["track", str(sequence_folder), "--out", str(out), "--quiet"]) == 0
     printed = capsys.readouterr().out
-    assert "frames: 20" in printed and "fps:" in printed
+    assert "frames: 20 · start-up " in printed and " fps over 17 frames" in printed
     assert "precision@20px: 1.000" in printed and "success AUC:" in printed
     boxes = read_boxes(out)  # read back to 0-based
     truth = read_boxes(sequence_folder / "groundtruth_rect.txt")
     assert boxes.shape == (20, 4)
     # The release's first box sits within half a pixel of the ground truth it was given.
     np.testing.assert_allclose(boxes[0], truth[0], atol=1.0)
+
+
+def test_the_printed_rate_leaves_the_start_up_frames_out(sequence_folder, monkeypatch, capsys):
+    from autotrack.cli.timing import STARTUP_FRAMES
+    from autotrack.pipeline import Pipeline
+
+    tracked = Pipeline.run
+
+    def compiling_first(self):  # a first run: the first frames wait for the compiler
+        for outcome in tracked(self):
+            if outcome.frame_index < STARTUP_FRAMES:
+                self.frame_seconds[outcome.frame_index] = 1000.0
+            yield outcome
+
+    monkeypatch.setattr(Pipeline, "run", compiling_first)
+    assert main(["track", str(sequence_folder), "--quiet"]) == 0
+    rate = re.search(r"tracker time only\) ([0-9.]+) fps over 17 frames", capsys.readouterr().out)
+    assert rate is not None and float(rate.group(1)) > 1.0  # 17 frames / 3000 s would be 0.006
 
 
 def _centres(boxes: np.ndarray) -> np.ndarray:

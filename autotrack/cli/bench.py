@@ -89,9 +89,12 @@ def run(args: argparse.Namespace) -> int:
     )
     from autotrack.evaluation.datasets import load_sequences
     from autotrack.evaluation.distributed import cluster_executor_for
+    from autotrack.extras import require_extra
     from autotrack.io.atomic import write_text
     from autotrack.machine import describe_machine, machine_line
 
+    if args.plots:
+        require_extra("matplotlib", "plots", "--plots")
     check_output_file(args.json, "--json", force=args.force)
     trackers = validate_tracker_names(args.trackers.split(","))
     if args.jobs < 1:

@@ -19,6 +19,7 @@ from autotrack.cli.checks import (
 )
 from autotrack.cli.live import add_live_arguments, check_source, run_localize_live
 from autotrack.cli.reports import DEFAULT_FPS, smoothed_report, summarise
+from autotrack.cli.timing import StartupClock
 from autotrack.errors import InputError
 from autotrack.io.boxes_json import read_boxes_json
 from autotrack.io.live import source_argument
@@ -190,6 +191,7 @@ def _choose_concurrency(args: argparse.Namespace, target_count: int) -> None:
 
 
 def run_localize(args: argparse.Namespace) -> int:
+    clock = StartupClock()
     from autotrack.io.frames import open_frames
     from autotrack.io.tum import read_tum
     from autotrack.localization.localizer import LocalizerParams
@@ -254,8 +256,10 @@ def run_localize(args: argparse.Namespace) -> int:
         for outcome in outcomes:
             records.append(outcome)
             progress.update()
+            clock.tick()
     timestamps = np.arange(len(records)) / fps
     report = summarise(records, timestamps, scene, args.out, args.tracks, gt, frames.name)
+    report += "\n" + clock.report("localising (decoding, tracking, poses)")
     if args.smoothed is not None and smoother is not None:
         report += "\n" + smoothed_report(records, timestamps, args.smoothed, smoother, gt)
     print(report)

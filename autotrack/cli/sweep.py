@@ -62,6 +62,7 @@ def run(args: argparse.Namespace) -> int:
         sweep_rows,
         write_outputs,
     )
+    from autotrack.extras import has_module, install_hint
     from autotrack.params import preset
 
     if args.colour_table is not None and not args.colour_table.is_file():
@@ -97,4 +98,6 @@ def run(args: argparse.Namespace) -> int:
     }
     written = write_outputs(args.out, rows, title=f"{args.preset} on {args.root.name}", meta=meta)
     print("written: " + ", ".join(str(path) for path in written))
+    if not has_module("matplotlib"):
+        print(f"sweep.png not drawn: matplotlib is not installed ({install_hint('plots')})")
     return 0

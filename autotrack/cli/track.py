@@ -16,6 +16,7 @@ from autotrack.cli.checks import (
     init_box,
 )
 from autotrack.cli.live import add_live_arguments, check_source, run_track_live
+from autotrack.cli.timing import STARTUP_FRAMES, StartupClock
 from autotrack.errors import InputError
 from autotrack.evaluation.datasets import GROUND_TRUTH_FILE
 from autotrack.evaluation.metrics import score_sequence
@@ -81,6 +82,7 @@ def _ground_truth(sequence: Path) -> np.ndarray | None:
 
 
 def run(args: argparse.Namespace) -> int:
+    clock = StartupClock()
     from autotrack.pipeline import Pipeline, Recording
 
     check_output_file(args.out, "--out", force=args.force)
@@ -121,12 +123,13 @@ def run(args: argparse.Namespace) -> int:
         for outcome in pipeline.run():
             boxes[outcome.frame_index] = outcome.tracks[target_id].box
             progress.update()
-        tracking_seconds = float(np.nansum(pipeline.frame_seconds))
+            clock.tick()
+        tracking_seconds = float(np.nansum(pipeline.frame_seconds[STARTUP_FRAMES:]))
     if args.out is not None:
         args.out.parent.mkdir(parents=True, exist_ok=True)
         write_boxes(args.out, boxes)
-    fps = len(frames) / tracking_seconds if tracking_seconds > 0 else float("inf")
-    print(f"frames: {len(frames)}  fps: {fps:.1f} (tracking time only)")
+    timing = clock.report("tracking (tracker time only)", tracking_seconds)
+    print(f"frames: {len(frames)} · {timing}")
     if ground_truth is not None and len(ground_truth) == len(boxes):
         score = score_sequence(frames.name, boxes, ground_truth)
         print(f"precision@20px: {score.precision:.3f}  success AUC: {score.auc:.3f}")

@@ -21,11 +21,12 @@ from contextlib import AbstractContextManager, contextmanager, nullcontext
 from pathlib import Path
 
 from autotrack.errors import AutoTrackError, InputError
+from autotrack.extras import install_hint
 
 CONNECT_TIMEOUT_S = 30.0
 """How long to wait for the scheduler to answer and for at least one worker to join."""
 
-INSTALL_HINT = "install the cluster extra: pip install 'autotrack-studio[cluster]'"
+INSTALL_HINT = f"install the cluster extra: {install_hint('cluster')}"
 
 RESUME_HINT = "the runs saved so far are kept: rerun the same command to resume"
 

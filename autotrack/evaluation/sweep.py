@@ -35,6 +35,7 @@ from autotrack.evaluation.benchmark import BenchmarkRun, TrackerSummary, summari
 from autotrack.evaluation.datasets import Sequence as BenchmarkSequence
 from autotrack.evaluation.peers import AutoTrackPeer
 from autotrack.evaluation.runs import TaskResult, run_resumable, track_timed
+from autotrack.extras import has_module
 from autotrack.io.atomic import write_figure, write_text
 from autotrack.io.csv_table import write_csv as write_table
 from autotrack.params import TrackerParams
@@ -358,7 +359,8 @@ def write_plot(path: Path, rows: Sequence[SweepRow], title: str = "") -> Path:
 def write_outputs(
     out_dir: Path, rows: Sequence[SweepRow], *, title: str = "", meta: Mapping | None = None
 ) -> list[Path]:
-    """sweep.csv, sweep.md, sweep.json and sweep.png in `out_dir`; returns their paths."""
+    """sweep.csv, sweep.md, sweep.json and (with matplotlib, the plots extra) sweep.png in
+    `out_dir`; returns the paths written."""
     out_dir.mkdir(parents=True, exist_ok=True)
     csv_path, md_path = out_dir / "sweep.csv", out_dir / "sweep.md"
     json_path, png_path = out_dir / "sweep.json", out_dir / "sweep.png"
@@ -382,8 +384,10 @@ def write_outputs(
         ],
     }
     write_text(json_path, json.dumps(summary, indent=2) + "\n")
-    write_plot(png_path, rows, title)
-    return [csv_path, md_path, json_path, png_path]
+    written = [csv_path, md_path, json_path]
+    if has_module("matplotlib"):  # the plots extra
+        written.append(write_plot(png_path, rows, title))
+    return written
 
 
 def limit_frames(sequences: Sequence[BenchmarkSequence], frames: int) -> list[BenchmarkSequence]:
