@@ -92,7 +92,7 @@ HYBRID = "hybrid"
 HYBRID_VARIANTS: dict[str, dict] = {
     HYBRID: {},
     f"{HYBRID} without box averaging": {"average_boxes": False},
-    f"{HYBRID} without filter re-initialisation": {"reinit_filter": False},
+    f"{HYBRID} with filter re-initialisation": {"reinit_filter": True},
     f"{HYBRID} without Siamese re-placing": {"place_siamese": False},
     f"{HYBRID} without continuity": {"continuity": False},
 }

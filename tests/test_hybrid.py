@@ -34,7 +34,8 @@ def _result(box, aberrant=False, theta=1.0, eta=0.01) -> TrackResult:
     )
 
 
-PREVIOUS = (100.0, 100.0, 20.0, 20.0)
+PREVIOUS_BOX = (100.0, 100.0, 20.0, 20.0)
+PREVIOUS = (PREVIOUS_BOX, PREVIOUS_BOX, PREVIOUS_BOX)  # hybrid, filter, Siamese
 NEAR = (102.0, 101.0, 20.0, 20.0)  # the target moved a little
 FAR = (160.0, 100.0, 20.0, 20.0)  # a look-alike three box widths away
 
@@ -60,13 +61,13 @@ def test_agreement_is_each_centre_within_the_other_box():
 
 
 @pytest.mark.parametrize(("aberrant", "theta"), [(True, 1.0), (False, math.nan)])
-def test_a_held_filter_gives_way_to_a_sure_siamese_box_and_restarts(aberrant, theta):
+def test_a_held_filter_gives_way_to_a_sure_siamese_box(aberrant, theta):
     held = _result(FAR, aberrant=aberrant, theta=theta)
     decision = fuse(held, _result(NEAR), 0.8, PREVIOUS, PARAMS)
     assert (decision.trusted, decision.box) == (SIAMESE, NEAR)
-    assert decision.reinit_filter and not decision.place_siamese
-    kept = fuse(held, _result(NEAR), 0.8, PREVIOUS, HybridParams(reinit_filter=False))
-    assert kept.trusted == SIAMESE and not kept.reinit_filter
+    assert not decision.reinit_filter and not decision.place_siamese
+    restart = fuse(held, _result(NEAR), 0.8, PREVIOUS, HybridParams(reinit_filter=True))
+    assert restart.trusted == SIAMESE and restart.reinit_filter
 
 
 def test_an_unsure_siamese_box_gives_way_to_the_filter_and_is_moved():
@@ -74,21 +75,32 @@ def test_an_unsure_siamese_box_gives_way_to_the_filter_and_is_moved():
         decision = fuse(_result(NEAR), siamese, score, PREVIOUS, PARAMS)
         assert (decision.trusted, decision.box) == (FILTER, NEAR)
         assert decision.place_siamese and not decision.reinit_filter
-    # Held filter, unsure Siamese: the filter still (nothing better to trust).
-    held = fuse(_result(NEAR, theta=math.nan), _result(FAR), 0.3, PREVIOUS, PARAMS)
-    assert held.trusted == FILTER
+    kept = fuse(_result(NEAR), _result(FAR), 0.3, PREVIOUS, HybridParams(place_siamese=False))
+    assert kept.trusted == FILTER and not kept.place_siamese
 
 
-def test_two_sure_trackers_trust_the_one_that_did_not_jump():
+def test_a_tracker_that_jumped_is_not_credible():
     siamese_jumped = fuse(_result(NEAR), _result(FAR), 0.9, PREVIOUS, PARAMS)
     assert (siamese_jumped.trusted, siamese_jumped.box) == (FILTER, NEAR)
     assert siamese_jumped.place_siamese
     filter_jumped = fuse(_result(FAR), _result(NEAR), 0.9, PREVIOUS, PARAMS)
     assert (filter_jumped.trusted, filter_jumped.box) == (SIAMESE, NEAR)
-    assert filter_jumped.reinit_filter
-    # Without continuity the filter is trusted whichever jumped.
+    # Without continuity a sure Siamese network and a learning filter are both credible: the
+    # filter is trusted, nobody restarts.
     off = fuse(_result(FAR), _result(NEAR), 0.9, PREVIOUS, HybridParams(continuity=False))
-    assert (off.trusted, off.box) == (FILTER, FAR)
+    assert (off.trusted, off.box, off.place_siamese) == (FILTER, FAR, False)
+
+
+def test_both_or_neither_credible_trusts_the_smaller_jump_from_the_hybrid_box():
+    # Both moved continuously from their own last boxes, which were apart: the Siamese box is
+    # where the hybrid was.
+    apart = (PREVIOUS_BOX, (158.0, 100.0, 20.0, 20.0), PREVIOUS_BOX)
+    both = fuse(_result(FAR), _result(NEAR), 0.9, apart, PARAMS)
+    assert (both.trusted, both.box) == (SIAMESE, NEAR)
+    assert not both.reinit_filter and not both.place_siamese
+    # A held filter and an unsure Siamese network: neither credible, the filter did not jump.
+    neither = fuse(_result(NEAR, theta=math.nan), _result(FAR), 0.3, PREVIOUS, PARAMS)
+    assert (neither.trusted, neither.box, neither.place_siamese) == (FILTER, NEAR, False)
 
 
 def test_inside_frame_clips_a_box_to_the_image():
@@ -130,6 +142,8 @@ def test_the_hybrid_restarts_the_filter_or_moves_the_siamese_track_on_real_frame
     with sequence.frames() as frames:
         frame = frames.read(4)
     stuck_box = (5.0, 5.0, 30.0, 30.0)  # the top-left corner, far from the gull
+    tracker = HybridTracker(HybridParams(reinit_filter=True, agree_radius=2.0))  # a fast gull
+    _run(sequence, tracker, 4)
     tracker.filter = _StuckFilter(stuck_box, held=True)
     result = tracker.update(frame)  # NanoTrack is sure of the gull: it wins, the filter restarts
     assert result.trusted == SIAMESE
@@ -140,6 +154,7 @@ def test_the_hybrid_restarts_the_filter_or_moves_the_siamese_track_on_real_frame
     unsure = HybridTracker(HybridParams(siamese_confident=1.01))  # never sure
     _run(sequence, unsure, 4)
     unsure.filter = _StuckFilter(stuck_box, held=False)
+    unsure.filter_box = stuck_box  # it has been stuck there: it did not jump
     result = unsure.update(frame)
     assert (result.trusted, result.box) == (FILTER, stuck_box)
     assert unsure.siamese.position == pytest.approx([20.0, 20.0])  # moved to the filter's box
@@ -167,3 +182,19 @@ def test_the_hybrid_is_not_worse_than_either_tracker_on_the_mean():
             aucs[label].append(score_sequence(name, boxes, sequence.ground_truth).auc)
     mean = {label: float(np.mean(values)) for label, values in aucs.items()}
     assert mean["hybrid"] >= max(mean["filter"], mean["siamese"]) - 0.01
+
+
+def test_make_tracker_builds_every_named_tracker():
+    from autotrack import AutoTrack
+    from autotrack.errors import InputError
+    from autotrack.hybrid.factory import TRACKERS, make_tracker
+    from autotrack.nanotrack import NanoTrack
+
+    assert {"autotrack", "autotrack+", "nanotrack", "hybrid"} <= set(TRACKERS)
+    assert isinstance(make_tracker("NanoTrack"), NanoTrack)
+    assert isinstance(make_tracker(" autotrack+ "), AutoTrack)
+    hybrid = make_tracker("hybrid")
+    assert isinstance(hybrid, HybridTracker)
+    assert hybrid.params.filter_params == HybridParams().filter_params
+    with pytest.raises(InputError, match="unknown tracker 'kcf2'"):
+        make_tracker("kcf2")

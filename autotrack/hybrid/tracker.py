@@ -6,21 +6,24 @@ target the Siamese network jumps off; it says when it cannot be trusted: its abe
 (eta >= phi, paper eq. 4) or its confidence gate closes, and it then does not learn the frame
 (`TrackResult.theta` is NaN). The Siamese network never learns, so it does not drift; it fits the
 box to the target's shape (the filter keeps its first aspect); and its score is a foreground
-probability. The rule (`fuse`):
+probability. Targets move continuously; a jump to a look-alike, or a filter re-learnt on the
+background, does not. The rule (`fuse`):
 
 1. Both agree on the centre (each centre within `agree_radius` of the other's box half-sides):
    the mean of the two boxes. Two trackers that see one object with errors of their own (the
    filter's fixed aspect, the network's coarse 16-pixel cells) average to a better box than
    either. Nobody is re-initialised: each stays an independent estimate.
-2. They disagree and the filter held its update (its own evidence of a loss) while the Siamese
-   foreground probability is at least `siamese_confident`: the Siamese box; the filter is
-   re-initialised there (a filter that stopped learning does not recover on its own).
-3. They disagree and the Siamese network is unsure (probability below `siamese_confident`, or
-   its own score map aberrant, eta >= phi): the filter's box; the Siamese track is moved there,
-   keeping its first-frame template (`NanoTrack.place`).
-4. They disagree and both are confident: one of them jumped. Targets move continuously, a jump
-   to a look-alike does not: the box whose centre is nearer the last hybrid box (in units of
-   its size) is trusted and the other tracker restarts from it.
+2. They disagree. Each is *credible* when its own evidence is good and it moved continuously
+   (its centre within `agree_radius` of its own last box: no jump): the filter when it learnt
+   this frame (not held), the Siamese network when its foreground probability is at least
+   `siamese_confident` and its score map is not aberrant (eta < phi). When exactly one is
+   credible it is trusted and the other may restart from its box: the Siamese track is moved
+   there keeping its first-frame template (`NanoTrack.place`); re-initialising the filter
+   (`reinit_filter`) is off by default, because a filter held on a target that turns or blurs
+   is often still right and a new filter forgets what the old one learnt (on the dev set it
+   cost more than it saved, docs/hybrid.md).
+3. Both or neither credible: the box that jumped less from the last hybrid box, and nobody is
+   restarted (no evidence says who is lost).
 
 Each branch can be switched off (`HybridParams`) for the ablation.
 """
@@ -61,14 +64,15 @@ class HybridParams:
     target rather than background."""
     average_boxes: bool = True
     """Rule 1 averages the two boxes (else it takes the filter's centre and the Siamese shape)."""
-    reinit_filter: bool = True
-    """Rules 2 and 4 re-initialise the filter on the Siamese box when they trust it (else the
-    filter keeps tracking on its own)."""
+    reinit_filter: bool = False
+    """Rule 2 re-initialises the filter on a credible Siamese box (else the filter keeps
+    tracking on its own)."""
     place_siamese: bool = True
-    """Rules 3 and 4 move the Siamese track to the filter's box when they trust it (else it
-    keeps searching on its own)."""
+    """Rule 2 moves the Siamese track to a credible filter box (else it keeps searching on its
+    own)."""
     continuity: bool = True
-    """Rule 4 trusts the box nearer the last hybrid box (else the filter's, as rule 3)."""
+    """Credibility includes moving continuously (else own evidence only, and rule 3 trusts the
+    filter)."""
 
 
 @dataclass(frozen=True)
@@ -138,27 +142,33 @@ def fuse(
     filter_result: TrackResult,
     siamese_result: TrackResult,
     siamese_score: float,
-    previous_box: Sequence[float],
+    previous: tuple[Box, Box, Box],
     params: HybridParams,
 ) -> Decision:
     """The fusion rule of one frame (module docstring): the box, whom it trusts, who restarts.
 
-    `siamese_score` is the Siamese foreground probability at its chosen cell; `previous_box` the
-    hybrid's box of the last frame."""
+    `siamese_score` is the Siamese foreground probability at its chosen cell; `previous` the
+    last frame's (hybrid, filter, Siamese) boxes."""
+    previous_box, previous_filter, previous_siamese = previous
     filter_box, siamese_box = filter_result.box, siamese_result.box
-    if centres_agree(filter_box, siamese_box, params.agree_radius):  # rule 1
+    radius = params.agree_radius
+    if centres_agree(filter_box, siamese_box, radius):  # rule 1
         if params.average_boxes:
             return Decision(mean_box(filter_box, siamese_box), BOTH, False, False)
         (cx, cy), (_, _, w, h) = centre(filter_box), siamese_box
         return Decision((cx - w / 2.0, cy - h / 2.0, w, h), BOTH, False, False)
-    siamese_sure = siamese_score >= params.siamese_confident and not siamese_result.aberrant
-    if filter_held(filter_result) and siamese_sure:  # rule 2
+    filter_credible = not filter_held(filter_result)
+    siamese_credible = siamese_score >= params.siamese_confident and not siamese_result.aberrant
+    if params.continuity:
+        filter_credible &= centres_agree(filter_box, previous_filter, radius)
+        siamese_credible &= centres_agree(siamese_box, previous_siamese, radius)
+    if siamese_credible and not filter_credible:  # rule 2
         return Decision(siamese_box, SIAMESE, params.reinit_filter, False)
-    if not siamese_sure or not params.continuity:  # rule 3 (or 4 switched off)
+    if filter_credible and not siamese_credible:
         return Decision(filter_box, FILTER, False, params.place_siamese)
-    if jump(siamese_box, previous_box) < jump(filter_box, previous_box):  # rule 4
-        return Decision(siamese_box, SIAMESE, params.reinit_filter, False)
-    return Decision(filter_box, FILTER, False, params.place_siamese)
+    if params.continuity and jump(siamese_box, previous_box) < jump(filter_box, previous_box):
+        return Decision(siamese_box, SIAMESE, False, False)  # rule 3
+    return Decision(filter_box, FILTER, False, False)
 
 
 def inside_frame(box: Sequence[float], size_wh: tuple[int, int], min_side: float = 2.0) -> Box:
@@ -185,13 +195,18 @@ class HybridTracker:
         self.frame_number = 0
         self.box: Box = (0.0, 0.0, 0.0, 0.0)
         """The last hybrid box."""
+        self.filter_box: Box = self.box
+        """The filter's last box (where it was restarted, if it was)."""
+        self.siamese_box: Box = self.box
+        """The Siamese track's last box (where it was moved, if it was)."""
 
     def init(self, frame_rgb: np.ndarray, box: Sequence[float]) -> HybridResult:
         """Start both trackers on the first frame's box."""
         filter_result = self.filter.init(frame_rgb, box)
         siamese_result = self.siamese.init(frame_rgb, box)
         self.frame_number = 1
-        self.box = filter_result.box
+        self.box = self.filter_box = filter_result.box
+        self.siamese_box = siamese_result.box
         return HybridResult(
             **_fields(filter_result),
             trusted=BOTH,
@@ -204,7 +219,8 @@ class HybridTracker:
         filter_result = self.filter.update(frame_rgb)
         siamese_result = self.siamese.update(frame_rgb)
         score = siamese_probability(siamese_result, self.siamese.peak_cell)
-        decision = fuse(filter_result, siamese_result, score, self.box, self.params)
+        previous = (self.box, self.filter_box, self.siamese_box)
+        decision = fuse(filter_result, siamese_result, score, previous, self.params)
         if decision.reinit_filter:
             height, width = frame_rgb.shape[:2]
             self.filter = self._new_filter()
@@ -213,6 +229,8 @@ class HybridTracker:
             self.siamese.place(decision.box)
         self.frame_number += 1
         self.box = tuple(float(v) for v in decision.box)
+        self.filter_box = self.box if decision.reinit_filter else filter_result.box
+        self.siamese_box = self.box if decision.place_siamese else siamese_result.box
         box = self.box
         fused = replace(filter_result, box=box, frame_index=self.frame_number - 1)
         return HybridResult(
