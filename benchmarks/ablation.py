@@ -206,27 +206,15 @@ def _task(kind: str, overrides: dict, sequence):
     return track(overrides, sequence)
 
 
-class _Boxes:
-    """A tracker returning `TrackResult`s seen as the benchmark's box tracker."""
-
-    def __init__(self, tracker) -> None:
-        self._tracker = tracker
-
-    def init(self, frame_rgb, box):
-        return tuple(self._tracker.init(frame_rgb, box).box)
-
-    def update(self, frame_rgb):
-        return tuple(self._tracker.update(frame_rgb).box)
-
-
-def new_box_tracker(kind: str, overrides: dict) -> _Boxes:
+def new_box_tracker(kind: str, overrides: dict):
     """NanoTrack, or the hybrid with `HybridParams` overrides, returning boxes."""
     from autotrack.hybrid import HybridParams, HybridTracker
+    from autotrack.hybrid.factory import BoxesOf
     from autotrack.nanotrack import NanoTrack
 
     if kind == NANOTRACK:
-        return _Boxes(NanoTrack())
-    return _Boxes(HybridTracker(replace(HybridParams(), **overrides)))
+        return BoxesOf(NanoTrack())
+    return BoxesOf(HybridTracker(replace(HybridParams(), **overrides)))
 
 
 def _paths(out: Path, folder: str, sequence) -> tuple[Path, Path]:

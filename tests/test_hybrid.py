@@ -198,3 +198,18 @@ def test_make_tracker_builds_every_named_tracker():
     assert hybrid.params.filter_params == HybridParams().filter_params
     with pytest.raises(InputError, match="unknown tracker 'kcf2'"):
         make_tracker("kcf2")
+
+
+@needs_sequences
+def test_the_benchmark_runs_nanotrack_and_the_hybrid_by_name():
+    from autotrack.evaluation.peers import TRACKER_NAMES, make_tracker
+
+    assert {"nanotrack", "hybrid", "csrt"} <= set(TRACKER_NAMES)
+    sequence = load_otb_sequence(shared_sequence_dir("OTB", "Crossing"))[0]
+    for name in ("nanotrack", "hybrid"):
+        tracker = make_tracker(name)
+        with sequence.frames() as frames:
+            boxes = [tracker.init(frames.read(0), sequence.init_box)]
+            boxes += [tracker.update(frames.read(index)) for index in (1, 2)]
+        assert all(len(box) == 4 and all(isinstance(v, float) for v in box) for box in boxes)
+        assert score_sequence("Crossing", np.array(boxes), sequence.ground_truth[:3]).auc > 0.5

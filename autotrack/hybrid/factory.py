@@ -13,8 +13,25 @@ from autotrack.errors import InputError
 from autotrack.params import PRESETS, TrackerParams, preset
 
 NANOTRACK, HYBRID = "nanotrack", "hybrid"
-TRACKERS: tuple[str, ...] = (*PRESETS, NANOTRACK, HYBRID)
+SIAMESE_TRACKERS: tuple[str, ...] = (NANOTRACK, HYBRID)
+"""The trackers beside the AutoTrack presets: NanoTrack and the hybrid."""
+TRACKERS: tuple[str, ...] = (*PRESETS, *SIAMESE_TRACKERS)
 """Every name `make_tracker` accepts: the AutoTrack presets, NanoTrack, the hybrid."""
+
+
+class BoxesOf:
+    """A tracker returning `TrackResult`s seen as a benchmark's box tracker (boxes only)."""
+
+    def __init__(self, tracker) -> None:
+        self.tracker = tracker
+
+    def init(self, frame_rgb, box) -> tuple[float, float, float, float]:
+        """Start on the first frame; returns the box."""
+        return tuple(self.tracker.init(frame_rgb, box).box)
+
+    def update(self, frame_rgb) -> tuple[float, float, float, float]:
+        """Track into the next frame; returns the box."""
+        return tuple(self.tracker.update(frame_rgb).box)
 
 
 def make_tracker(
