@@ -1,4 +1,5 @@
-"""The `autotrack+` ablation (like the paper's Table 2) and its parameter sensitivity, on the dev set.
+"""The `autotrack+` ablation (like the paper's Table 2) and its parameter sensitivity, on the dev set;
+NanoTrack and the hybrid tracker with each of its fusion switches (`--hybrid`).
 
 Runs every variant below on every sequence of ../shared/data/sequences (resumable: boxes already in
 --out are reused; delete a variant's folder after changing the tracker), scores them with the
@@ -7,6 +8,12 @@ together against the faithful preset, OpenCV CSRT and the authors' own outputs; 
 P@20 / AUC; and how the `autotrack+` mean moves when each new parameter is halved and doubled.
 
     python benchmarks/ablation.py --jobs 2 [--update-doc] [--no-sensitivity]
+    python benchmarks/ablation.py --hybrid [--no-sensitivity] [--speed] --out /tmp/ablation
+
+With `--hybrid` only the faithful preset, `autotrack+`, NanoTrack and the hybrid variants run,
+and the table compares them: mean P@20 / AUC, per-sequence AUC, the sequences where a variant is
+worse than NanoTrack by more than 0.05 AUC, frames/s on one thread; `--speed` adds frames/s of
+NanoTrack, `autotrack+` and the hybrid on one thread on frames resized to 1280x720.
 """
 
 from __future__ import annotations
@@ -25,7 +32,7 @@ from autotrack.evaluation.benchmark import run_task
 from autotrack.evaluation.datasets import load_sequences
 from autotrack.evaluation.metrics import score_sequence
 from autotrack.evaluation.peers import AutoTrackPeer
-from autotrack.evaluation.runs import SINGLE_THREAD_ENVIRONMENT, track_timed
+from autotrack.evaluation.runs import SINGLE_THREAD_ENVIRONMENT, single_thread, track_timed
 from autotrack.io.otb_boxes import read_boxes, write_boxes
 from autotrack.params import PRESETS
 
@@ -78,6 +85,48 @@ CANDIDATES: dict[str, dict] = {
 }
 """Switches measured on top of `autotrack+` but left out of the preset (docs/benchmarks.md);
 their parameters' sensitivity is taken around these variants."""
+
+
+NANOTRACK = "nanotrack"
+HYBRID = "hybrid"
+HYBRID_VARIANTS: dict[str, dict] = {
+    HYBRID: {},
+    f"{HYBRID} without box averaging": {"average_boxes": False},
+    f"{HYBRID} with filter re-initialisation": {"reinit_filter": True},
+    f"{HYBRID} without Siamese re-placing": {"place_siamese": False},
+    f"{HYBRID} without continuity": {"continuity": False},
+}
+"""The hybrid tracker and each of its fusion switches off (`autotrack.hybrid.HybridParams`)."""
+HYBRID_SENSITIVE = ("agree_radius", "siamese_confident")
+"""The hybrid's numeric parameters, halved and doubled in the sensitivity rows."""
+
+
+def hybrid_variants(sensitivity: bool) -> dict[str, dict]:
+    """Hybrid label -> `HybridParams` overrides: the switches, then the sensitivity rows."""
+    from autotrack.hybrid import HybridParams
+
+    table = dict(HYBRID_VARIANTS)
+    if sensitivity:
+        for name in HYBRID_SENSITIVE:
+            value = getattr(HybridParams(), name)
+            for factor in (0.5, 2.0):
+                table[f"{HYBRID} {name} x{factor:g}"] = {name: value * factor}
+    return table
+
+
+def kind_of(label: str) -> str:
+    """Which tracker a label runs: 'csrt', 'nanotrack', 'hybrid' or 'autotrack'."""
+    if label in ("csrt", NANOTRACK):
+        return label
+    return HYBRID if label.startswith(HYBRID) else "autotrack"
+
+
+def folder_of(label: str, overrides: dict) -> str:
+    """Folder name of a label's results."""
+    kind = kind_of(label)
+    if kind == HYBRID:
+        return HYBRID + "".join(f"__{k}={overrides[k]}" for k in sorted(overrides))
+    return kind if kind in ("csrt", NANOTRACK) else slug(overrides)
 
 
 def plus_overrides() -> dict:
@@ -151,7 +200,21 @@ def _task(kind: str, overrides: dict, sequence):
     if kind == "csrt":
         result = run_task("csrt", sequence)
         return result.boxes, result.times
+    if kind in (NANOTRACK, HYBRID):
+        result = track_timed(kind, lambda: new_box_tracker(kind, overrides), sequence)
+        return result.boxes, result.times
     return track(overrides, sequence)
+
+
+def new_box_tracker(kind: str, overrides: dict):
+    """NanoTrack, or the hybrid with `HybridParams` overrides, returning boxes."""
+    from autotrack.hybrid import HybridParams, HybridTracker
+    from autotrack.hybrid.factory import BoxesOf
+    from autotrack.nanotrack import NanoTrack
+
+    if kind == NANOTRACK:
+        return BoxesOf(NanoTrack())
+    return BoxesOf(HybridTracker(replace(HybridParams(), **overrides)))
 
 
 def _paths(out: Path, folder: str, sequence) -> tuple[Path, Path]:
@@ -166,8 +229,8 @@ def run_all(
 
     With `resume_only`, nothing is run: variants missing any sequence are left out.
     """
-    folders = {label: slug(overrides) for label, overrides in table.items()}
-    folders["csrt"] = "csrt"
+    folders = {label: folder_of(label, overrides) for label, overrides in table.items()}
+    folders.setdefault("csrt", "csrt")
     results: dict[str, dict] = {label: {} for label in folders}
     todo = []
     for label, folder in folders.items():
@@ -184,7 +247,8 @@ def run_all(
         return {k: v for k, v in results.items() if len(v) == len(sequences)}
     # The faithful preset and autotrack+ first, then the ablation rows, CSRT, and the
     # sensitivity runs; within a variant the longest sequences first (balances the pool).
-    priority = [FAITHFUL, PLUS, *ABLATION, *LEAVE_OUTS, *CANDIDATES, "csrt"]
+    priority = [FAITHFUL, PLUS, NANOTRACK, *HYBRID_VARIANTS, *ABLATION, *LEAVE_OUTS, *CANDIDATES]
+    priority.append("csrt")
     priority += list(folders)
     todo.sort(key=lambda item: (priority.index(item[0]), -len(item[2])))
     os.environ.update(SINGLE_THREAD_ENVIRONMENT)
@@ -192,9 +256,11 @@ def run_all(
     # the parent's thread count and fail when a kernel is compiled (a cold numba cache).
     with ProcessPoolExecutor(max_workers=max(jobs, 1), mp_context=get_context("spawn")) as pool:
         futures = {
-            pool.submit(
-                _task, "csrt" if label == "csrt" else "autotrack", table.get(label, {}), sequence
-            ): (label, folder, sequence)
+            pool.submit(_task, kind_of(label), table.get(label, {}), sequence): (
+                label,
+                folder,
+                sequence,
+            )
             for label, folder, sequence in todo
         }
         for count, future in enumerate(as_completed(futures), 1):
@@ -333,6 +399,103 @@ def _sensitivity_lines(results: dict, scores: dict, names: list[str]) -> list[st
     return lines
 
 
+def _hybrid_row(label: str, scores: dict, names: list[str], results: dict) -> str:
+    p, a = _mean(scores[label], names)
+    nano = scores[NANOTRACK]
+    worse = [n for n in names if scores[label][n].auc < nano[n].auc - 0.05]
+    return (
+        f"| {label} | {p:.3f} | {a:.3f} | {len(worse)} {' '.join(worse)} | "
+        f"{_fps(results[label]):.1f} |"
+    )
+
+
+def build_hybrid_table(sequences, results: dict) -> str:
+    """The hybrid's table: each tracker's mean and per-sequence scores, the sequences where it
+    is worse than NanoTrack by more than 0.05 AUC, its sensitivity rows."""
+    names = [s.name for s in sequences]
+    scores = {label: _scores(sequences, runs) for label, runs in results.items()}
+    main = [FAITHFUL, PLUS, "csrt", NANOTRACK, *HYBRID_VARIANTS]
+    labels = [label for label in main if label in results]
+    lines = [
+        f"{len(sequences)} sequences, {sum(len(s) for s in sequences)} frames, one thread per "
+        "tracker process. *worse than NanoTrack*: sequences whose AUC is below NanoTrack's by "
+        "more than 0.05.",
+        "",
+        "| tracker | P@20 | AUC | worse than NanoTrack | fps (median) |",
+        "|---|---|---|---|---|",
+        *(_hybrid_row(label, scores, names, results) for label in labels),
+        "",
+        "Per sequence, AUC:",
+        "",
+        "| sequence | " + " | ".join(labels) + " |",
+        "|---|" + "---|" * len(labels),
+    ]
+    for sequence in sequences:
+        cells = [f"{scores[label][sequence.name].auc:.3f}" for label in labels]
+        lines.append(f"| {sequence.dataset}/{sequence.name} | " + " | ".join(cells) + " |")
+    sensitivity = [label for label in results if label.startswith(f"{HYBRID} ") and " x" in label]
+    if sensitivity:
+        base_p, base_a = _mean(scores[HYBRID], names)
+        lines += [
+            "",
+            "Sensitivity of the hybrid: mean P@20 / AUC with one parameter halved or doubled.",
+            "",
+            "| parameter | x0.5 | x2 |",
+            "|---|---|---|",
+        ]
+        for name in HYBRID_SENSITIVE:
+            cells = []
+            for factor in (0.5, 2.0):
+                label = f"{HYBRID} {name} x{factor:g}"
+                if label not in scores:
+                    cells.append("not run")
+                    continue
+                p, a = _mean(scores[label], names)
+                cells.append(f"{p:.3f} / {a:.3f} ({p - base_p:+.3f} / {a - base_a:+.3f})")
+            lines.append(f"| `{name}` | " + " | ".join(cells) + " |")
+    return "\n".join(lines)
+
+
+def speed_1280x720(sequence, frames: int = 120, rounds: int = 2) -> str:
+    """Frames/s on one thread of NanoTrack, `autotrack+` and the hybrid on a sequence's frames
+    resized to 1280x720 (the box scaled alike), the three interleaved `rounds` times; the best
+    round's median frame time of each."""
+    import time
+
+    import cv2
+
+    from autotrack import AutoTrack, preset
+    from autotrack.hybrid import HybridTracker
+    from autotrack.nanotrack import NanoTrack
+
+    count = min(frames, len(sequence))
+    with sequence.frames() as source:
+        first = source.read(0)
+        images = [cv2.resize(source.read(i), (1280, 720)) for i in range(count)]
+    sx, sy = 1280 / first.shape[1], 720 / first.shape[0]
+    x, y, w, h = sequence.init_box
+    box = (x * sx, y * sy, w * sx, h * sy)
+    makers = {
+        NANOTRACK: NanoTrack,
+        PLUS: lambda: AutoTrack(preset(PLUS)),
+        HYBRID: HybridTracker,
+    }
+    best = dict.fromkeys(makers, 0.0)
+    with single_thread():
+        for _ in range(rounds):
+            for name, make in makers.items():
+                tracker = make()
+                tracker.init(images[0], box)
+                times = []
+                for image in images[1:]:
+                    start = time.perf_counter()
+                    tracker.update(image)
+                    times.append(time.perf_counter() - start)
+                best[name] = max(best[name], 1.0 / float(np.median(times)))
+    cells = ", ".join(f"{name} {fps:.1f}" for name, fps in best.items())
+    return f"1280x720, one thread, {sequence.name} ({count} frames): frames/s {cells}"
+
+
 def update_doc(tables: str) -> None:
     """Replace the ablation section of docs/benchmarks.md (between its markers)."""
     text = DOC.read_text()
@@ -351,8 +514,20 @@ def main() -> None:
     )
     parser.add_argument("--only", default=None, help="comma-separated labels: run just these")
     parser.add_argument("--update-doc", action="store_true", help=f"rewrite the tables in {DOC}")
+    parser.add_argument("--hybrid", action="store_true", help="NanoTrack and the hybrid table")
+    parser.add_argument("--speed", action="store_true", help="with --hybrid: fps on 1280x720")
     args = parser.parse_args()
     sequences = load_sequences(args.root)
+    if args.hybrid:
+        hybrid_table = {FAITHFUL: {}, PLUS: plus_overrides(), NANOTRACK: {}}
+        hybrid_table.update(hybrid_variants(sensitivity=not args.no_sensitivity))
+        if args.only:
+            hybrid_table = {k: v for k, v in hybrid_table.items() if k in args.only.split(",")}
+        results = run_all(sequences, hybrid_table, args.out, args.jobs, args.resume_only)
+        print(build_hybrid_table(sequences, results))
+        if args.speed:
+            print(speed_1280x720(next(s for s in sequences if s.name == "S1301")))
+        return
     table = variants(sensitivity=not args.no_sensitivity)
     if args.only:
         wanted = args.only.split(",")

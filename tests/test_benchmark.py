@@ -82,6 +82,8 @@ def test_make_tracker_knows_every_name_and_rejects_others():
         "strcf+asr",
         "strcf+atr",
         "autotrack+",
+        "nanotrack",
+        "hybrid",
         "csrt",
         "kcf",
         "mosse",

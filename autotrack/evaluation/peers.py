@@ -18,6 +18,7 @@ import cv2
 import numpy as np
 
 from autotrack.errors import InputError
+from autotrack.hybrid import factory
 from autotrack.params import PRESETS, TrackerParams, preset
 
 Box = tuple[float, float, float, float]
@@ -29,8 +30,9 @@ OPENCV_TRACKERS: dict[str, Callable[[], cv2.Tracker]] = {
 }
 """OpenCV peers by name."""
 
-TRACKER_NAMES: tuple[str, ...] = (*PRESETS, *OPENCV_TRACKERS)
-"""Every name `make_tracker` accepts: the AutoTrack presets, then the OpenCV peers."""
+TRACKER_NAMES: tuple[str, ...] = (*factory.TRACKERS, *OPENCV_TRACKERS)
+"""Every name `make_tracker` accepts: the AutoTrack presets, NanoTrack and the hybrid, then the
+OpenCV peers."""
 
 
 class BoxTracker(Protocol):
@@ -103,6 +105,8 @@ def make_tracker(name: str, colour_table: str | Path | None = None) -> BoxTracke
         return AutoTrackPeer(preset(key, colour_table))
     if key in OPENCV_TRACKERS:
         return OpenCVPeer(key)
+    if key in factory.SIAMESE_TRACKERS:
+        return factory.BoxesOf(factory.make_tracker(key, colour_table=colour_table))
     raise InputError(f"unknown tracker {name!r}; choose from {', '.join(TRACKER_NAMES)}")
 
 

@@ -1,0 +1,245 @@
+"""The hybrid tracker: AutoTrack+ (a correlation filter) and NanoTrack (a Siamese network) on the
+same frames, fused frame by frame by what each says about itself.
+
+The two fail differently. The filter learns the target online and holds a small or look-alike
+target the Siamese network jumps off; it says when it cannot be trusted: its aberrance stop
+(eta >= phi, paper eq. 4) or its confidence gate closes, and it then does not learn the frame
+(`TrackResult.theta` is NaN). The Siamese network never learns, so it does not drift; it fits the
+box to the target's shape (the filter keeps its first aspect); and its score is a foreground
+probability. Targets move continuously; a jump to a look-alike, or a filter re-learnt on the
+background, does not. The rule (`fuse`):
+
+1. Both agree on the centre (each centre within `agree_radius` of the other's box half-sides):
+   the mean of the two boxes. Two trackers that see one object with errors of their own (the
+   filter's fixed aspect, the network's coarse 16-pixel cells) average to a better box than
+   either. Nobody is re-initialised: each stays an independent estimate.
+2. They disagree. Each is *credible* when its own evidence is good and it moved continuously
+   (its centre within `agree_radius` of its own last box: no jump): the filter when it learnt
+   this frame (not held), the Siamese network when its foreground probability is at least
+   `siamese_confident` and its score map is not aberrant (eta < phi). When exactly one is
+   credible it is trusted and the other may restart from its box: the Siamese track is moved
+   there keeping its first-frame template (`NanoTrack.place`); re-initialising the filter
+   (`reinit_filter`) is off by default, because a filter held on a target that turns or blurs
+   is often still right and a new filter forgets what the old one learnt (on the dev set it
+   cost more than it saved, docs/hybrid.md).
+3. Both or neither credible: the box that jumped less from the last hybrid box, and nobody is
+   restarted (no evidence says who is lost).
+
+Each branch can be switched off (`HybridParams`) for the ablation.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass, field, replace
+
+import numpy as np
+
+from autotrack.nanotrack import NanoTrack, NanoTrackParams
+from autotrack.params import TrackerParams, preset
+from autotrack.result import TrackResult
+
+Box = tuple[float, float, float, float]
+
+BOTH, FILTER, SIAMESE = "both", "filter", "siamese"
+"""Which tracker the hybrid box came from: agreement, the correlation filter, the Siamese one."""
+
+
+@dataclass(frozen=True)
+class HybridParams:
+    """The two trackers and the fusion's parameters (module docstring)."""
+
+    filter_params: TrackerParams = field(default_factory=lambda: preset("autotrack+"))
+    """The correlation filter's parameters (the `autotrack+` preset)."""
+    siamese_params: NanoTrackParams = field(default_factory=NanoTrackParams)
+    """NanoTrack's parameters and model files."""
+    agree_radius: float = 1.0
+    """The trackers agree when each box centre lies within `agree_radius` times the other box's
+    half width and half height of its centre: 1 is "inside the other's box", the loosest test
+    under which both still point at one object of the target's size."""
+    siamese_confident: float = 0.5
+    """The Siamese foreground probability (the score map at the chosen cell, a two-class
+    softmax) above which its box is trusted over a held filter: 0.5 is where the network says
+    target rather than background."""
+    average_boxes: bool = True
+    """Rule 1 averages the two boxes (else it takes the filter's centre and the Siamese shape)."""
+    reinit_filter: bool = False
+    """Rule 2 re-initialises the filter on a credible Siamese box (else the filter keeps
+    tracking on its own)."""
+    place_siamese: bool = True
+    """Rule 2 moves the Siamese track to a credible filter box (else it keeps searching on its
+    own)."""
+    continuity: bool = True
+    """Credibility includes moving continuously (else own evidence only, and rule 3 trusts the
+    filter)."""
+
+
+@dataclass(frozen=True)
+class Decision:
+    """What the fusion rule made of one frame."""
+
+    box: Box
+    """The hybrid's box, 0-based (x, y, w, h)."""
+    trusted: str
+    """BOTH, FILTER or SIAMESE."""
+    reinit_filter: bool
+    """Start the filter again on `box`."""
+    place_siamese: bool
+    """Move the Siamese track to `box` (keeping its template)."""
+
+
+@dataclass(frozen=True)
+class HybridResult(TrackResult):
+    """A `TrackResult` whose box is the fused one; its signals and maps are the filter's. The
+    two trackers' own results and which one was trusted ride along."""
+
+    trusted: str = BOTH
+    """BOTH, FILTER or SIAMESE: where this frame's box came from."""
+    filter_result: TrackResult | None = None
+    """The correlation filter's own result this frame (before any re-initialisation)."""
+    siamese_result: TrackResult | None = None
+    """NanoTrack's own result this frame."""
+
+
+def centre(box: Sequence[float]) -> tuple[float, float]:
+    """Centre (cx, cy) of an (x, y, w, h) box."""
+    return (box[0] + box[2] / 2.0, box[1] + box[3] / 2.0)
+
+
+def centres_agree(first: Sequence[float], second: Sequence[float], radius: float) -> bool:
+    """Each box's centre lies within `radius` half-sides of the other's centre."""
+    (x1, y1), (x2, y2) = centre(first), centre(second)
+    dx, dy = abs(x1 - x2), abs(y1 - y2)
+    return all(
+        dx <= radius * box[2] / 2.0 and dy <= radius * box[3] / 2.0 for box in (first, second)
+    )
+
+
+def filter_held(result: TrackResult) -> bool:
+    """The filter's own evidence that it lost the target: it did not learn this frame (the
+    aberrance stop, eta >= phi, or the confidence gate; theta is NaN when it did not train)."""
+    return result.aberrant or not math.isfinite(result.theta)
+
+
+def siamese_probability(result: TrackResult, peak_cell: tuple[int, int]) -> float:
+    """The Siamese foreground probability at the cell its box came from."""
+    return float(result.response_map[peak_cell])
+
+
+def mean_box(first: Sequence[float], second: Sequence[float]) -> Box:
+    """The element-wise mean of two (x, y, w, h) boxes."""
+    return tuple((float(u) + float(v)) / 2.0 for u, v in zip(first, second, strict=True))
+
+
+def jump(box: Sequence[float], previous: Sequence[float]) -> float:
+    """How far a box's centre moved from the previous box's, in units of the previous size."""
+    (x, y), (px, py) = centre(box), centre(previous)
+    return math.hypot(x - px, y - py) / math.sqrt(max(previous[2] * previous[3], 1e-9))
+
+
+def fuse(
+    filter_result: TrackResult,
+    siamese_result: TrackResult,
+    siamese_score: float,
+    previous: tuple[Box, Box, Box],
+    params: HybridParams,
+) -> Decision:
+    """The fusion rule of one frame (module docstring): the box, whom it trusts, who restarts.
+
+    `siamese_score` is the Siamese foreground probability at its chosen cell; `previous` the
+    last frame's (hybrid, filter, Siamese) boxes."""
+    previous_box, previous_filter, previous_siamese = previous
+    filter_box, siamese_box = filter_result.box, siamese_result.box
+    radius = params.agree_radius
+    if centres_agree(filter_box, siamese_box, radius):  # rule 1
+        if params.average_boxes:
+            return Decision(mean_box(filter_box, siamese_box), BOTH, False, False)
+        (cx, cy), (_, _, w, h) = centre(filter_box), siamese_box
+        return Decision((cx - w / 2.0, cy - h / 2.0, w, h), BOTH, False, False)
+    filter_credible = not filter_held(filter_result)
+    siamese_credible = siamese_score >= params.siamese_confident and not siamese_result.aberrant
+    if params.continuity:
+        filter_credible &= centres_agree(filter_box, previous_filter, radius)
+        siamese_credible &= centres_agree(siamese_box, previous_siamese, radius)
+    if siamese_credible and not filter_credible:  # rule 2
+        return Decision(siamese_box, SIAMESE, params.reinit_filter, False)
+    if filter_credible and not siamese_credible:
+        return Decision(filter_box, FILTER, False, params.place_siamese)
+    if params.continuity and jump(siamese_box, previous_box) < jump(filter_box, previous_box):
+        return Decision(siamese_box, SIAMESE, False, False)  # rule 3
+    return Decision(filter_box, FILTER, False, False)
+
+
+def inside_frame(box: Sequence[float], size_wh: tuple[int, int], min_side: float = 2.0) -> Box:
+    """The part of a box inside a frame of (width, height), at least `min_side` on each side."""
+    width, height = size_wh
+    x0 = min(max(box[0], 0.0), width - min_side)
+    y0 = min(max(box[1], 0.0), height - min_side)
+    x1 = max(min(box[0] + box[2], float(width)), x0 + min_side)
+    y1 = max(min(box[1] + box[3], float(height)), y0 + min_side)
+    return (x0, y0, x1 - x0, y1 - y0)
+
+
+class HybridTracker:
+    """AutoTrack+ and NanoTrack fused by `fuse`: `init(frame, box)`, `update(frame)` return
+    `HybridResult`s."""
+
+    def __init__(self, params: HybridParams | None = None) -> None:
+        from autotrack import AutoTrack
+
+        self.params = params or HybridParams()
+        self._new_filter = lambda: AutoTrack(self.params.filter_params)
+        self.filter = self._new_filter()
+        self.siamese = NanoTrack(self.params.siamese_params)
+        self.frame_number = 0
+        self.box: Box = (0.0, 0.0, 0.0, 0.0)
+        """The last hybrid box."""
+        self.filter_box: Box = self.box
+        """The filter's last box (where it was restarted, if it was)."""
+        self.siamese_box: Box = self.box
+        """The Siamese track's last box (where it was moved, if it was)."""
+
+    def init(self, frame_rgb: np.ndarray, box: Sequence[float]) -> HybridResult:
+        """Start both trackers on the first frame's box."""
+        filter_result = self.filter.init(frame_rgb, box)
+        siamese_result = self.siamese.init(frame_rgb, box)
+        self.frame_number = 1
+        self.box = self.filter_box = filter_result.box
+        self.siamese_box = siamese_result.box
+        return HybridResult(
+            **_fields(filter_result),
+            trusted=BOTH,
+            filter_result=filter_result,
+            siamese_result=siamese_result,
+        )
+
+    def update(self, frame_rgb: np.ndarray) -> HybridResult:
+        """Track into the next frame with both trackers and fuse their boxes."""
+        filter_result = self.filter.update(frame_rgb)
+        siamese_result = self.siamese.update(frame_rgb)
+        score = siamese_probability(siamese_result, self.siamese.peak_cell)
+        previous = (self.box, self.filter_box, self.siamese_box)
+        decision = fuse(filter_result, siamese_result, score, previous, self.params)
+        if decision.reinit_filter:
+            height, width = frame_rgb.shape[:2]
+            self.filter = self._new_filter()
+            self.filter.init(frame_rgb, inside_frame(decision.box, (width, height)))
+        if decision.place_siamese:
+            self.siamese.place(decision.box)
+        self.frame_number += 1
+        self.box = tuple(float(v) for v in decision.box)
+        self.filter_box = self.box if decision.reinit_filter else filter_result.box
+        self.siamese_box = self.box if decision.place_siamese else siamese_result.box
+        box = self.box
+        fused = replace(filter_result, box=box, frame_index=self.frame_number - 1)
+        return HybridResult(
+            **_fields(fused),
+            trusted=decision.trusted,
+            filter_result=filter_result,
+            siamese_result=siamese_result,
+        )
+
+
+def _fields(result: TrackResult) -> dict:
+    return {name: getattr(result, name) for name in TrackResult.__dataclass_fields__}

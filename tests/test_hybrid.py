@@ -1,0 +1,215 @@
+"""The hybrid tracker (`autotrack.hybrid`): each branch of the fusion rule on constructed cases,
+the re-initialisations on real frames, and the hybrid on real sequences against both trackers."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from autotrack.evaluation.datasets import load_otb_sequence
+from autotrack.evaluation.metrics import score_sequence
+from autotrack.hybrid import HybridParams, HybridResult, HybridTracker, fuse
+from autotrack.hybrid.tracker import BOTH, FILTER, SIAMESE, centres_agree, inside_frame
+from autotrack.result import TrackResult
+from tests.conftest import needs_sequences, shared_sequence_dir
+
+PARAMS = HybridParams()
+
+
+def _result(box, aberrant=False, theta=1.0, eta=0.01) -> TrackResult:
+    return TrackResult(
+        frame_index=5,
+        box=box,
+        peak_score=0.5,
+        response_map=None,
+        local_variation=None,
+        global_variation=eta,
+        theta_ref=1.0,
+        theta=theta,
+        aberrant=aberrant,
+        scale_factor=1.0,
+        search_box=(0.0, 0.0, 100.0, 100.0),
+    )
+
+
+PREVIOUS_BOX = (100.0, 100.0, 20.0, 20.0)
+PREVIOUS = (PREVIOUS_BOX, PREVIOUS_BOX, PREVIOUS_BOX)  # hybrid, filter, Siamese
+NEAR = (102.0, 101.0, 20.0, 20.0)  # the target moved a little
+FAR = (160.0, 100.0, 20.0, 20.0)  # a look-alike three box widths away
+
+
+def test_agreeing_trackers_average_their_boxes():
+    siamese = (104.0, 103.0, 16.0, 24.0)
+    decision = fuse(_result(NEAR), _result(siamese), 0.9, PREVIOUS, PARAMS)
+    assert decision.trusted == BOTH
+    assert decision.box == pytest.approx((103.0, 102.0, 18.0, 22.0))
+    assert not decision.reinit_filter and not decision.place_siamese
+    centred = fuse(
+        _result(NEAR), _result(siamese), 0.9, PREVIOUS, HybridParams(average_boxes=False)
+    )
+    assert centred.box == pytest.approx((104.0, 99.0, 16.0, 24.0))  # filter centre, Siamese shape
+
+
+def test_agreement_is_each_centre_within_the_other_box():
+    assert centres_agree((0, 0, 20, 20), (9, 9, 20, 20), 1.0)
+    assert not centres_agree((0, 0, 20, 20), (11, 0, 20, 20), 1.0)
+    assert centres_agree((0, 0, 20, 20), (11, 0, 20, 20), 2.0)
+    # A small box beside a large one: the large one's centre is outside the small one.
+    assert not centres_agree((0, 0, 4, 4), (-10, -10, 30, 30), 1.0)
+
+
+@pytest.mark.parametrize(("aberrant", "theta"), [(True, 1.0), (False, math.nan)])
+def test_a_held_filter_gives_way_to_a_sure_siamese_box(aberrant, theta):
+    held = _result(FAR, aberrant=aberrant, theta=theta)
+    decision = fuse(held, _result(NEAR), 0.8, PREVIOUS, PARAMS)
+    assert (decision.trusted, decision.box) == (SIAMESE, NEAR)
+    assert not decision.reinit_filter and not decision.place_siamese
+    restart = fuse(held, _result(NEAR), 0.8, PREVIOUS, HybridParams(reinit_filter=True))
+    assert restart.trusted == SIAMESE and restart.reinit_filter
+
+
+def test_an_unsure_siamese_box_gives_way_to_the_filter_and_is_moved():
+    for siamese, score in ((_result(FAR), 0.3), (_result(FAR, aberrant=True, eta=0.5), 0.9)):
+        decision = fuse(_result(NEAR), siamese, score, PREVIOUS, PARAMS)
+        assert (decision.trusted, decision.box) == (FILTER, NEAR)
+        assert decision.place_siamese and not decision.reinit_filter
+    kept = fuse(_result(NEAR), _result(FAR), 0.3, PREVIOUS, HybridParams(place_siamese=False))
+    assert kept.trusted == FILTER and not kept.place_siamese
+
+
+def test_a_tracker_that_jumped_is_not_credible():
+    siamese_jumped = fuse(_result(NEAR), _result(FAR), 0.9, PREVIOUS, PARAMS)
+    assert (siamese_jumped.trusted, siamese_jumped.box) == (FILTER, NEAR)
+    assert siamese_jumped.place_siamese
+    filter_jumped = fuse(_result(FAR), _result(NEAR), 0.9, PREVIOUS, PARAMS)
+    assert (filter_jumped.trusted, filter_jumped.box) == (SIAMESE, NEAR)
+    # Without continuity a sure Siamese network and a learning filter are both credible: the
+    # filter is trusted, nobody restarts.
+    off = fuse(_result(FAR), _result(NEAR), 0.9, PREVIOUS, HybridParams(continuity=False))
+    assert (off.trusted, off.box, off.place_siamese) == (FILTER, FAR, False)
+
+
+def test_both_or_neither_credible_trusts_the_smaller_jump_from_the_hybrid_box():
+    # Both moved continuously from their own last boxes, which were apart: the Siamese box is
+    # where the hybrid was.
+    apart = (PREVIOUS_BOX, (158.0, 100.0, 20.0, 20.0), PREVIOUS_BOX)
+    both = fuse(_result(FAR), _result(NEAR), 0.9, apart, PARAMS)
+    assert (both.trusted, both.box) == (SIAMESE, NEAR)
+    assert not both.reinit_filter and not both.place_siamese
+    # A held filter and an unsure Siamese network: neither credible, the filter did not jump.
+    neither = fuse(_result(NEAR, theta=math.nan), _result(FAR), 0.3, PREVIOUS, PARAMS)
+    assert (neither.trusted, neither.box, neither.place_siamese) == (FILTER, NEAR, False)
+
+
+def test_inside_frame_clips_a_box_to_the_image():
+    assert inside_frame((-5.0, 10.0, 20.0, 20.0), (100, 50)) == (0.0, 10.0, 15.0, 20.0)
+    assert inside_frame((98.0, 49.0, 20.0, 20.0), (100, 50)) == (98.0, 48.0, 2.0, 2.0)
+
+
+def _run(sequence, tracker, count):
+    boxes, results = [], []
+    with sequence.frames() as frames:
+        for index in range(count):
+            frame = frames.read(index)
+            result = tracker.init(frame, sequence.init_box) if index == 0 else tracker.update(frame)
+            boxes.append(result.box)
+            results.append(result)
+    return np.array(boxes), results
+
+
+class _StuckFilter:
+    """A correlation filter stuck on a box away from the target, held (aberrant) or learning."""
+
+    def __init__(self, box, held: bool) -> None:
+        self.box, self.held = box, held
+
+    def update(self, frame_rgb):
+        return _result(self.box, aberrant=self.held)
+
+
+@needs_sequences
+def test_the_hybrid_restarts_the_filter_or_moves_the_siamese_track_on_real_frames():
+    from autotrack import AutoTrack
+
+    sequence = load_otb_sequence(shared_sequence_dir("DTB70", "Gull1"))[0]
+    tracker = HybridTracker()
+    _, results = _run(sequence, tracker, 4)
+    assert all(isinstance(r, HybridResult) for r in results)
+    assert [r.frame_index for r in results] == [0, 1, 2, 3]
+    assert results[-1].trusted == BOTH
+    with sequence.frames() as frames:
+        frame = frames.read(4)
+    stuck_box = (5.0, 5.0, 30.0, 30.0)  # the top-left corner, far from the gull
+    tracker = HybridTracker(HybridParams(reinit_filter=True, agree_radius=2.0))  # a fast gull
+    _run(sequence, tracker, 4)
+    tracker.filter = _StuckFilter(stuck_box, held=True)
+    result = tracker.update(frame)  # NanoTrack is sure of the gull: it wins, the filter restarts
+    assert result.trusted == SIAMESE
+    assert result.box == result.siamese_result.box
+    assert isinstance(tracker.filter, AutoTrack)
+    assert tracker.filter.update(frame).box == pytest.approx(result.box, abs=2.0)
+
+    unsure = HybridTracker(HybridParams(siamese_confident=1.01))  # never sure
+    _run(sequence, unsure, 4)
+    unsure.filter = _StuckFilter(stuck_box, held=False)
+    unsure.filter_box = stuck_box  # it has been stuck there: it did not jump
+    result = unsure.update(frame)
+    assert (result.trusted, result.box) == (FILTER, stuck_box)
+    assert unsure.siamese.position == pytest.approx([20.0, 20.0])  # moved to the filter's box
+
+
+SEQUENCES = [("DTB70", "Gull1"), ("DTB70", "Animal1"), ("OTB", "DragonBaby"), ("OTB", "Crossing")]
+
+
+@needs_sequences
+@pytest.mark.slow
+def test_the_hybrid_is_not_worse_than_either_tracker_on_the_mean():
+    from autotrack import AutoTrack, preset
+    from autotrack.nanotrack import NanoTrack
+
+    aucs = {"hybrid": [], "filter": [], "siamese": []}
+    for dataset, name in SEQUENCES:
+        sequence = load_otb_sequence(shared_sequence_dir(dataset, name))[0]
+        makers = {
+            "hybrid": HybridTracker,
+            "filter": lambda: AutoTrack(preset("autotrack+")),
+            "siamese": NanoTrack,
+        }
+        for label, make in makers.items():
+            boxes, _ = _run(sequence, make(), len(sequence))
+            aucs[label].append(score_sequence(name, boxes, sequence.ground_truth).auc)
+    mean = {label: float(np.mean(values)) for label, values in aucs.items()}
+    assert mean["hybrid"] >= max(mean["filter"], mean["siamese"]) - 0.01
+
+
+def test_make_tracker_builds_every_named_tracker():
+    from autotrack import AutoTrack
+    from autotrack.errors import InputError
+    from autotrack.hybrid.factory import TRACKERS, make_tracker
+    from autotrack.nanotrack import NanoTrack
+
+    assert {"autotrack", "autotrack+", "nanotrack", "hybrid"} <= set(TRACKERS)
+    assert isinstance(make_tracker("NanoTrack"), NanoTrack)
+    assert isinstance(make_tracker(" autotrack+ "), AutoTrack)
+    hybrid = make_tracker("hybrid")
+    assert isinstance(hybrid, HybridTracker)
+    assert hybrid.params.filter_params == HybridParams().filter_params
+    with pytest.raises(InputError, match="unknown tracker 'kcf2'"):
+        make_tracker("kcf2")
+
+
+@needs_sequences
+def test_the_benchmark_runs_nanotrack_and_the_hybrid_by_name():
+    from autotrack.evaluation.peers import TRACKER_NAMES, make_tracker
+
+    assert {"nanotrack", "hybrid", "csrt"} <= set(TRACKER_NAMES)
+    sequence = load_otb_sequence(shared_sequence_dir("OTB", "Crossing"))[0]
+    for name in ("nanotrack", "hybrid"):
+        tracker = make_tracker(name)
+        with sequence.frames() as frames:
+            boxes = [tracker.init(frames.read(0), sequence.init_box)]
+            boxes += [tracker.update(frames.read(index)) for index in (1, 2)]
+        assert all(len(box) == 4 and all(isinstance(v, float) for v in box) for box in boxes)
+        assert score_sequence("Crossing", np.array(boxes), sequence.ground_truth[:3]).auc > 0.5
