@@ -34,9 +34,7 @@ class SessionList:
 
     def refresh(self) -> None:
         """List the recorded sessions this tab's browser may see (app/owners.py), newest first."""
-        self.choices = {
-            readable(path.name): path for path in self.controller.space.session_files()
-        }
+        self.choices = {readable(path.name): path for path in self.controller.space.session_files()}
 
     def last_own(self) -> Path | None:
         """The newest session this browser recorded (in its own folder) that no tab is still

@@ -25,7 +25,6 @@ from app.uploads import UploadReceiver
 from app.viser_private import check_viser_version, guard_handshakes, handshake_headers
 from autotrack.errors import AutoTrackError
 from autotrack.tracker.parallel.target_process import WorkerPool
-from autotrack.tracker.parallel.warmup import warm_up
 
 LOG = logging.getLogger(__name__)
 

@@ -13,7 +13,7 @@ import threading
 import time
 from collections.abc import Callable
 
-from autotrack.tracker.warmup import warm_up
+from autotrack.tracker.parallel.warmup import warm_up
 
 TICK_SECONDS = 1.0
 """How often the notice's elapsed time is shown again."""

@@ -33,7 +33,7 @@ from autotrack.localization.pnp import boxes_by_landmark  # noqa: E402
 from autotrack.localization.scene import load_scene  # noqa: E402
 from autotrack.params import preset  # noqa: E402
 from autotrack.pipeline import Pipeline, Recording  # noqa: E402
-from autotrack.tracker.warmup import warm_up  # noqa: E402
+from autotrack.tracker.parallel.warmup import warm_up  # noqa: E402
 
 DEMO = REPO / "static" / "demo"
 
