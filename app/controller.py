@@ -21,28 +21,25 @@ from app.boxes import Box, ground_truth_positions, overlapped_target
 from app.config import AppConfig
 from app.groundtruth import (
     TruthPoses,
-    TruthView,
     charted_view,
-    landmark_truth_views,
     load_landmark_truth,
     load_truth,
     load_truth_poses,
-    truth_view,
 )
-from app.landmarks import LandmarkTies, search_message
+from app.landmarks import LandmarkTies, load_boxes_json, search_message
 from app.owners import BrowserSpace
 from app.paths import display_name, find_sequences, resolve_user_path, store_upload
 from app.recordings import RecordingRegistry
 from app.reopening import SessionList
+from app.tracker_choice import TrackerChoice
+from app.truth_commands import start_from_truth, truth_views
 from app.views import FrameView, frame_view
 from autotrack.errors import InputError
-from autotrack.io.boxes_json import read_boxes_json
 from autotrack.io.frames import FrameSource, open_frames
-from autotrack.localization.pnp import boxes_by_landmark
 from autotrack.localization.reacquire import ReacquireParams
 from autotrack.localization.refine import RefineParams
 from autotrack.localization.scene import Scene, load_scene
-from autotrack.params import PRESETS, preset
+from autotrack.params import preset
 from autotrack.pipeline import Pipeline, Recording, TrackedTarget
 from autotrack.sessions import Session
 from autotrack.tracker.parallel.target_process import WorkerPool
@@ -102,6 +99,8 @@ class TabController:
         """The last thing the tab told its user."""
         self.sequence_choices: dict[str, Path] = {}
         """Name shown in the sequence list -> sequence path."""
+        self.tracker = TrackerChoice(self)
+        """The Tracker choice and when it applies (app/tracker_choice.py)."""
         self.sessions = SessionList(self)
         """The recorded sessions this tab lists, and reopening them (app/reopening.py)."""
         self.suggested_session: str | None = None
@@ -156,34 +155,9 @@ class TabController:
         this browser recorded a session before (a reloaded page closed its tab), say how to
         pick it up again."""
         self.refresh_sequences()
-        self.refresh_sessions()
-        self.open(self.config.sequence or self.config.demo_dir, self.config.scene)
-        last = self.sessions.last_own()
-        self.suggested_session = None if last is None else last.name
-        if last is not None:
-            self.message += (
-                f" Your last session here, {last.name}, is chosen in *Session → Sessions*: "
-                "*Reopen and continue* picks it up where it stopped."
-            )
-
-    # -- the session list (app/reopening.py) ------------------------------------------------
-
-    @property
-    def session_choices(self) -> dict[str, Path]:
-        """Name shown in the session list -> session file, newest first."""
-        return self.sessions.choices
-
-    def refresh_sessions(self) -> None:
-        """List the recorded sessions this tab's browser may see, newest first."""
         self.sessions.refresh()
-
-    def reopen(self, name: str) -> None:
-        """Reopen the session listed as `name` and continue it (see SessionList.reopen)."""
-        self.sessions.reopen(name)
-
-    def review_session(self, path: Path) -> None:
-        """Open a live run's recording to look through (see SessionList.review)."""
-        self.sessions.review(path)
+        self.open(self.config.sequence or self.config.demo_dir, self.config.scene)
+        self.sessions.point_to_last()
 
     def refresh_sequences(self) -> None:
         """List the sequences under this tab's folders."""
@@ -217,69 +191,17 @@ class TabController:
         return path
 
     def choose_preset(self, name: str) -> None:
-        """Use tracker preset `name` from the next target on: a run without targets is made
-        again with it at once; a run whose targets track with another preset says so, and
-        `restart_with_preset` opens the sequence again with it."""
-        if name not in PRESETS:
-            raise InputError(f"unknown tracker preset {name!r}; choose one of {sorted(PRESETS)}")
-        self.preset_name = name
-        if self.run is None or self.run.params.name == name:
-            self.message = f"Tracker: {name}."
-        elif self._follow_preset():
-            self.message = f"Tracker: {name}, for the targets drawn from now on."
-        else:
-            self.message = self.preset_note()
+        """Use tracker preset `name` from the next target on (app/tracker_choice.py)."""
+        self.tracker.choose(name)
 
     @property
     def preset_pending(self) -> bool:
         """Whether the chosen preset differs from the one the open run's targets track with."""
-        return self.run is not None and self.run.params.name != self.preset_name
-
-    def preset_note(self) -> str:
-        """What the page says while the chosen preset waits for a restart ('' when none)."""
-        if not self.preset_pending:
-            return ""
-        used, chosen = self.require_run().params.name, self.preset_name
-        if not self.file_run:
-            return (
-                f"This run tracks with {used}: {chosen} applies to the next sequence opened "
-                "(a live source's run cannot be restarted)."
-            )
-        return (
-            f"This run's targets track with {used}: {chosen} applies only after "
-            f"*Sequence → Restart with {chosen}* (opens this sequence again on this frame; "
-            "the session recorded so far is kept)."
-        )
-
-    def _follow_preset(self) -> bool:
-        """Before the run's first target: make the run again with the chosen preset if it has
-        another (the session then records the parameters the targets really use). True when
-        the run uses the chosen preset afterwards."""
-        run = self.require_run()
-        if run.params.name == self.preset_name:
-            return True
-        if run.targets or not self.file_run or self.sequence_path is None:
-            return False
-        cursor, message = self.cursor, self.message
-        self.open(self.sequence_path, self.scene_path, scene_given=True)
-        self.cursor, self.message = min(cursor, self.require_run().frame_count - 1), message
-        return True
+        return self.tracker.pending
 
     def restart_with_preset(self) -> None:
-        """Open the sequence again with the chosen preset, on the current frame (the targets
-        are dropped; the session recorded so far is finished and kept)."""
-        run = self.require_run()
-        if not self.preset_pending:
-            raise InputError(f"this run already tracks with {run.params.name}")
-        if not self.file_run or self.sequence_path is None:
-            raise InputError(self.preset_note())
-        cursor = self.cursor
-        self.open(self.sequence_path, self.scene_path, scene_given=True)
-        self.cursor = min(cursor, self.require_run().frame_count - 1)
-        self.message = (
-            f"Restarted with {self.preset_name} on frame {self.cursor + 1}: draw the targets "
-            "again (or Start from ground truth)."
-        )
+        """Open the sequence again with the chosen preset, on the current frame."""
+        self.tracker.restart()
 
     def open_upload(self, file_name: str, content: bytes | Path) -> None:
         """Store an uploaded video or zip of images (bytes or a received file) safely, then
@@ -392,7 +314,7 @@ class TabController:
             run.frames.close()
             if finished is not None:
                 self.recordings.release(finished)
-                self.refresh_sessions()  # the finished session is listed at once
+                self.sessions.refresh()  # the finished session is listed at once
 
     def claim_recording(self) -> None:
         """Register the run's session file (created at the first edit) as this tab's."""
@@ -400,7 +322,7 @@ class TabController:
         if path is not None and path != self.recording_path:
             self.recordings.claim(path, self.tab_id)
             self.recording_path = path
-            self.refresh_sessions()  # the new session file is listed from its first box
+            self.sessions.refresh()  # the new session file is listed from its first box
 
     # -- targets ------------------------------------------------------------------------------
 
@@ -412,7 +334,7 @@ class TabController:
         self.stop_playing()
         target_id = self.selected or overlapped_target(self.targets(), self.cursor, box)
         if target_id is None:
-            self._follow_preset()
+            self.tracker.follow()
         run = self.require_run()
         if target_id is None:
             if len(run.targets) >= self.config.max_targets:
@@ -421,7 +343,7 @@ class TabController:
                     "'Drag draws' to redraw its box, or delete one first"
                 )
             target_id = run.add_target(self.cursor, box, None)
-            self.message = f"{target_id} drawn at frame {self.cursor + 1}. {self.preset_note()}"
+            self.message = f"{target_id} drawn at frame {self.cursor + 1}. {self.tracker.note()}"
             self._search_landmarks()
         else:
             corrected = self.cursor in run.targets[target_id].results
@@ -439,86 +361,14 @@ class TabController:
         self.message += search_message(run, self.ties.search(run, self.cursor))
 
     def start_from_truth(self) -> None:
-        """Start (or restart) the ground-truth target from the current frame's ground-truth
-        box; its live scores are computed against the ground truth. The first target of a
-        run takes the chosen tracker preset (see choose_preset). A sequence with per-landmark
-        ground truth (the demo's groundtruth/) starts a target per landmark instead."""
-        if self.truth is None and self.landmark_truth:
-            return self._start_from_landmark_truth()
-        if self.truth is None:
-            raise InputError("this sequence has no groundtruth_rect.txt or groundtruth/")
-        self._follow_preset()
-        run = self.require_run()
-        row = self.truth[self.cursor]
-        if not (np.isfinite(row).all() and row[2] > 0 and row[3] > 0):
-            raise InputError(f"the ground truth has no box on frame {self.cursor + 1}")
-        self.stop_playing()
-        box = (float(row[0]), float(row[1]), float(row[2]), float(row[3]))
-        if self.truth_target in run.targets:
-            run.place_box(self.truth_target, self.cursor, box)
-        else:
-            if len(run.targets) >= self.config.max_targets:
-                raise InputError("already the maximum number of targets: delete one first")
-            self.truth_target = run.add_target(self.cursor, box, None)
-        self.message = (
-            f"{self.truth_target} started from the ground truth at frame {self.cursor + 1}; "
-            f"its scores grow as it tracks (Debugging → Ground truth). {self.preset_note()}"
-        ).strip()
-        self.claim_recording()
-
-    def _start_from_landmark_truth(self) -> None:
-        """Every landmark's ground-truth box on the current frame: the target tied to it
-        restarts there, a landmark without one gets a new target."""
-        boxes = {}
-        for landmark_id, rows in self.landmark_truth.items():
-            row = rows[self.cursor]
-            if np.isfinite(row).all() and row[2] > 0 and row[3] > 0:
-                boxes[landmark_id] = (float(row[0]), float(row[1]), float(row[2]), float(row[3]))
-        if not boxes:
-            raise InputError(f"the ground truth has no box on frame {self.cursor + 1}")
-        self.stop_playing()
-        self._follow_preset()
-        run = self.require_run()
-        tied = {t.landmark_id: t.id for t in run.targets.values() if t.landmark_id is not None}
-        new = {lid: box for lid, box in boxes.items() if lid not in tied}
-        if len(run.targets) + len(new) > self.config.max_targets:
-            raise InputError(
-                f"{len(new)} more targets would pass the maximum ({self.config.max_targets}): "
-                "delete some first"
-            )
-        for landmark_id, box in boxes.items():
-            if landmark_id in tied:
-                run.place_box(tied[landmark_id], self.cursor, box)
-        if new:
-            run.add_targets(self.cursor, new)
-        self.message = (
-            f"{len(boxes)} targets started from the landmarks' ground truth at frame "
-            f"{self.cursor + 1}; their scores grow as they track (Debugging → Ground truth). "
-            f"{self.preset_note()}"
-        ).strip()
-        self.claim_recording()
+        """Start (or restart) targets from the current frame's ground truth (one target's
+        box, or every landmark's: app/truth_commands.py); they are scored against it."""
+        start_from_truth(self)
 
     @property
     def has_truth(self) -> bool:
         """Whether the sequence carries ground-truth boxes (one target's, or per landmark)."""
         return self.truth is not None or bool(self.landmark_truth)
-
-    def truth_views(self) -> tuple[TruthView, ...]:
-        """The ground truth on the current frame and the scores of the targets against it:
-        the target started from groundtruth_rect.txt (else T1), or each landmark's target."""
-        run = self.run
-        if run is None:
-            return ()
-        if self.truth is not None:
-            return (truth_view(self.truth, self.cursor, self.scored_target()),)
-        return landmark_truth_views(self.landmark_truth, run.targets, self.cursor)
-
-    def scored_target(self) -> TrackedTarget | None:
-        """The target scored against the ground truth: the one started from it, else T1."""
-        run = self.run
-        if run is None or self.truth is None:
-            return None
-        return run.targets.get(self.truth_target or "T1")
 
     def select(self, target_id: str | None) -> None:
         """Choose the target a drag redraws (None: drags make new targets)."""
@@ -549,29 +399,8 @@ class TabController:
         self.selected = None
 
     def load_boxes_json(self) -> None:
-        """Place the boxes of the sequence's boxes.json on frame 1, one target per landmark
-        (a list of boxes is assigned to landmarks by the correspondence search)."""
-        self.boxes_json_boxes("this sequence has no boxes.json")  # refused before reopening
-        self.stop_playing()
-        self._follow_preset()
-        run = self.require_run()
-        boxes = self.boxes_json_boxes("this sequence has no boxes.json")
-        self.cursor = 0
-        run.add_targets(0, boxes)
-        self.message = f"Loaded {len(boxes)} boxes from boxes.json on frame 1."
-        self.claim_recording()
-
-    def boxes_json_boxes(self, missing: str) -> dict[str, Box]:
-        """The boxes.json boxes by landmark, for a run with no target yet (file or live)."""
-        run = self.require_run()
-        if self.boxes_path is None or run.scene is None:
-            raise InputError(missing)
-        if run.targets:  # it adds a target per landmark: more would pass the cap, or stack
-            raise InputError(
-                f"boxes.json adds a target for every landmark: delete the {len(run.targets)} "
-                "drawn first, or draw the rest by hand"
-            )
-        return boxes_by_landmark(read_boxes_json(self.boxes_path), run.scene)
+        """Place the sequence's boxes.json on frame 1, one target per landmark (app/landmarks.py)."""
+        load_boxes_json(self)
 
     # -- playback -----------------------------------------------------------------------------
 
@@ -648,7 +477,7 @@ class TabController:
         """Everything the display shows for the current frame (None without a run)."""
         if self.run is None:
             return None
-        truths = self.truth_views()
+        truths = truth_views(self)
         charted = charted_view(truths, (self.selected, self.truth_target)) if truths else None
         return frame_view(
             self.run,

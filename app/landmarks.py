@@ -6,9 +6,16 @@ hand are kept. No viser here; the controller calls it and the panels show `Landm
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
 
-from autotrack.localization.pnp import Correspondence, rank_correspondences
+from autotrack.errors import InputError
+from autotrack.io.boxes_json import read_boxes_json
+from autotrack.localization.pnp import Correspondence, boxes_by_landmark, rank_correspondences
 from autotrack.pipeline import Pipeline
+
+if TYPE_CHECKING:
+    from app.boxes import Box
+    from app.controller import TabController
 
 MIN_POINTS = 4
 """The search needs four boxes (P3P on three, the fourth to check)."""
@@ -140,3 +147,32 @@ def search_message(run: Pipeline, outcome: Assignment | None) -> str:
         return " " + outcome.warning
     ties = ", ".join(f"{tid} → {run.targets[tid].landmark_id}" for tid in outcome.target_ids)
     return f" Landmarks by the correspondence search: {ties}."
+
+
+def load_boxes_json(controller: TabController) -> None:
+    """Place the boxes of the controller's sequence's boxes.json on frame 1, one target per
+    landmark (a list of boxes is assigned to landmarks by the correspondence search); the
+    first target of a run takes the chosen tracker preset."""
+    boxes_json_boxes(controller, "this sequence has no boxes.json")  # refused before reopening
+    controller.stop_playing()
+    controller.tracker.follow()
+    run = controller.require_run()
+    boxes = boxes_json_boxes(controller, "this sequence has no boxes.json")
+    controller.cursor = 0
+    run.add_targets(0, boxes)
+    controller.message = f"Loaded {len(boxes)} boxes from boxes.json on frame 1."
+    controller.claim_recording()
+
+
+def boxes_json_boxes(controller: TabController, missing: str) -> dict[str, Box]:
+    """The boxes.json boxes by landmark, for a run with no target yet (file or live; `missing`:
+    the message when there is no boxes.json or no scene)."""
+    run = controller.require_run()
+    if controller.boxes_path is None or run.scene is None:
+        raise InputError(missing)
+    if run.targets:  # it adds a target per landmark: more would pass the cap, or stack
+        raise InputError(
+            f"boxes.json adds a target for every landmark: delete the {len(run.targets)} "
+            "drawn first, or draw the rest by hand"
+        )
+    return boxes_by_landmark(read_boxes_json(controller.boxes_path), run.scene)

@@ -21,6 +21,7 @@ import numpy as np
 
 from app.browser_text import markdown_literal
 from app.controller import POSE_OPTIONS, TabController
+from app.landmarks import boxes_json_boxes
 from app.paths import display_name, live_source
 from app.views import FrameView, SignalHistory
 from autotrack.errors import AutoTrackError, InputError
@@ -176,7 +177,7 @@ class LiveControl:
         """Place the boxes.json beside the scene (or the video) on the frozen frame."""
         controller = self.controller
         run = controller.require_run()
-        boxes = controller.boxes_json_boxes("no boxes.json beside the scene file or the video")
+        boxes = boxes_json_boxes(controller, "no boxes.json beside the scene file or the video")
         run.add_targets(controller.cursor, boxes)
         controller.message = f"Loaded {len(boxes)} boxes from boxes.json on the frozen frame."
         controller.claim_recording()
@@ -245,7 +246,7 @@ class LiveControl:
         self.controller.close_run()
         if path is not None and path.is_file():
             try:
-                self.controller.review_session(path)
+                self.controller.sessions.review(path)
             except AutoTrackError as error:  # the recording stays on disk as written
                 self.review_error = str(error)
             return path

@@ -7,10 +7,7 @@ the controller (app/controller.py) holds the state.
 
 from __future__ import annotations
 
-import threading
-from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Any
 
 import numpy as np
 import viser
@@ -21,6 +18,7 @@ from app.config import AppConfig
 from app.controller import TabController
 from app.live import DISABLED_HINT, FROZEN, OFF, PREVIEW, TRACKING, LiveControl
 from app.paths import display_name
+from app.quiet import QuietWrites
 from app.targets_table import targets_table
 from app.zoom import MAX_ZOOM
 from autotrack.params import PRESETS
@@ -47,35 +45,6 @@ TRAJECTORY_SMOOTHED = "smoothed (0.3 s lag)"
 ZOOM_CLICK = "where you click"
 ZOOM_FOLLOW = "the target in Drag draws"
 """Maps choice -> the map `draw_overlays` blends over the frame."""
-
-
-class QuietWrites:
-    """Writes to widgets that do not fire this tab's own on_update callbacks."""
-
-    def __init__(self) -> None:
-        self._local = threading.local()
-
-    def set(self, handle: Any, attribute: str, value: Any) -> None:
-        """`handle.attribute = value`, without triggering the callbacks wrapped by `user_edit`."""
-        self._local.active = True
-        try:
-            setattr(handle, attribute, value)
-        finally:
-            self._local.active = False
-
-    def set_options(self, dropdown: viser.GuiDropdownHandle, options: tuple[str, ...]) -> None:
-        """A dropdown's options, sent only when they changed."""
-        if tuple(dropdown.options) != options:
-            self.set(dropdown, "options", options)
-
-    def user_edit(self, callback: Callable[[], None]) -> Callable[[Any], None]:
-        """An on_update callback that runs `callback` unless the app itself wrote the value."""
-
-        def on_update(_event: Any) -> None:
-            if not getattr(self._local, "active", False):
-                callback()
-
-        return on_update
 
 
 @dataclass
@@ -420,7 +389,7 @@ def show_state(panels: Panels, controller: TabController) -> None:
     for button in (playback.play, playback.step_back, playback.step):  # nothing to play
         quiet.set(button, "disabled", run is None or run.frame_count == 0)
     session = panels.session
-    quiet.set_options(session.sessions, tuple(controller.session_choices) or (NO_CHOICE,))
+    quiet.set_options(session.sessions, tuple(controller.sessions.choices) or (NO_CHOICE,))
     path = None if run is None else run.session_path
     recording = "Not recording yet (draw a box)." if path is None else f"Recording to `{path.name}`"
     quiet.set(session.recording, "content", recording)
@@ -454,8 +423,8 @@ def show_opened(panels: Panels, controller: TabController) -> None:
     quiet.set(panels.targets.box, "value", "")  # a box typed for the run before is not this one's
     quiet.set(panels.playback.frame, "max", max(2, 0 if run is None else run.frame_count))
     suggested = controller.suggested_session  # this browser's last session, after a reload
-    if suggested is not None and suggested in controller.session_choices:
-        quiet.set_options(panels.session.sessions, tuple(controller.session_choices))
+    if suggested is not None and suggested in controller.sessions.choices:
+        quiet.set_options(panels.session.sessions, tuple(controller.sessions.choices))
         quiet.set(panels.session.sessions, "value", suggested)
     listed = next((n for n, p in controller.sequence_choices.items() if p == path), None)
     if listed is not None:  # the list shows the sequence that is open

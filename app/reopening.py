@@ -46,6 +46,18 @@ class SessionList:
                 return path
         return None
 
+    def point_to_last(self) -> None:
+        """Choose this browser's last session for the Sessions list (a reloaded page's new
+        tab) and say how to pick it up."""
+        controller = self.controller
+        last = self.last_own()
+        controller.suggested_session = None if last is None else last.name
+        if last is not None:
+            controller.message += (
+                f" Your last session here, {last.name}, is chosen in *Session → Sessions*: "
+                "*Reopen and continue* picks it up where it stopped."
+            )
+
     def reopen(self, name: str) -> None:
         """Reopen the session listed as `name` and continue it into a new session file, with
         the tracker parameters it was recorded with."""

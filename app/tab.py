@@ -175,8 +175,10 @@ class Tab:
         session.download_mot.on_click(lambda _: submit(self.download, "mot"))
         session.download_cvat.on_click(lambda _: submit(self.download, "cvat"))
         session.download_mcap.on_click(lambda _: submit(self.download, "mcap"))
-        session.refresh.on_click(lambda _: submit(controller.refresh_sessions))
-        session.reopen.on_click(lambda _: submit(controller.reopen, session.sessions.value))
+        session.refresh.on_click(lambda _: submit(controller.sessions.refresh))
+        session.reopen.on_click(
+            lambda _: submit(controller.sessions.reopen, session.sessions.value)
+        )
 
     def _connect_live(self) -> None:
         """The Live folder's buttons (absent without --allow-live)."""

@@ -1136,8 +1136,8 @@ def test_one_browser_does_not_see_another_browsers_sessions_and_uploads(studio) 
     studio.close_tab(1)
 
     bob, bob_channel = _open_tab(studio, tab_id=2, browser="bob")
-    bob.controller.refresh_sessions()
-    assert list(bob.controller.session_choices) == [operators.name]
+    bob.controller.sessions.refresh()
+    assert list(bob.controller.sessions.choices) == [operators.name]
     assert not any(path == uploaded for path in bob.controller.sequence_choices.values())
     bob.controller.refresh_sequences()
     assert uploaded not in bob.controller.sequence_choices.values()
@@ -1148,8 +1148,8 @@ def test_one_browser_does_not_see_another_browsers_sessions_and_uploads(studio) 
     assert bob.controller.sequence_path != uploaded
 
     again, _ = _open_tab(studio, tab_id=3, browser="alice")  # alice's next tab sees hers
-    again.controller.refresh_sessions()
-    assert {recorded.name, operators.name} <= set(again.controller.session_choices)
+    again.controller.sessions.refresh()
+    assert {recorded.name, operators.name} <= set(again.controller.sessions.choices)
     assert uploaded in again.controller.sequence_choices.values()
 
 
@@ -1162,8 +1162,8 @@ def test_share_sessions_lists_every_browsers_sessions(studio) -> None:
     studio.close_tab(1)
     studio.config = replace(studio.config, share_sessions=True)
     bob, _ = _open_tab(studio, tab_id=2, browser="bob")
-    bob.controller.refresh_sessions()
-    assert recorded.name in bob.controller.session_choices
+    bob.controller.sessions.refresh()
+    assert recorded.name in bob.controller.sessions.choices
 
 
 def test_messages_and_fields_show_paths_relative_to_their_root(studio, tmp_path: Path) -> None:

@@ -482,13 +482,13 @@ def test_reopening_continues_with_the_recorded_tracker_parameters(tmp_path: Path
     try:
         second.open_initial()
         with pytest.raises(InputError, match="another tab"):
-            second.reopen(old_path.name)
+            second.sessions.reopen(old_path.name)
         first.close()
         assert registry.writer_of(old_path) is None
-        second.refresh_sessions()
+        second.sessions.refresh()
         with pytest.raises(InputError, match="choose a session"):
-            second.reopen("missing.mcap")
-        second.reopen(old_path.name)
+            second.sessions.reopen("missing.mcap")
+        second.sessions.reopen(old_path.name)
 
         run = second.run
         assert run.params == preset("strcf") and second.preset_name == "strcf"  # shown as such
@@ -508,16 +508,16 @@ def test_a_session_is_listed_from_its_first_box_without_a_refresh(tmp_path: Path
     controller = _controller(tmp_path / "sessions")
     try:
         controller.open_initial()
-        assert controller.session_choices == {}  # nothing recorded before the app started
+        assert controller.sessions.choices == {}  # nothing recorded before the app started
         controller.place_box(tuple(_demo_boxes()["A"]))
         recording = controller.run.session_path
-        assert recording is not None and recording.name in controller.session_choices
+        assert recording is not None and recording.name in controller.sessions.choices
         controller.step(1)
         controller.open_initial()  # opening again finishes that recording: still listed
-        assert controller.session_choices[recording.name] == recording
-        controller.reopen(recording.name)
-        assert recording.name in controller.session_choices
-        assert controller.run.session_path.name in controller.session_choices  # its successor
+        assert controller.sessions.choices[recording.name] == recording
+        controller.sessions.reopen(recording.name)
+        assert recording.name in controller.sessions.choices
+        assert controller.run.session_path.name in controller.sessions.choices  # its successor
     finally:
         controller.close()
 
@@ -873,7 +873,7 @@ def test_a_tracker_chosen_with_targets_says_it_needs_a_restart_and_restarts(cont
     controller.restart_with_preset()
     assert controller.run.params == preset("strcf") and not controller.preset_pending
     assert controller.cursor == 1 and not controller.run.targets
-    assert first_session.name in controller.session_choices  # the earlier session is kept
+    assert first_session.name in controller.sessions.choices  # the earlier session is kept
     controller.place_box(tuple(_demo_boxes()["A"]))
     assert controller.run.params == preset("strcf")
     with pytest.raises(InputError, match="already tracks with strcf"):

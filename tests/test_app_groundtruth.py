@@ -12,6 +12,7 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 from app.groundtruth import TruthPoses, load_truth_poses, pose_errors
+from app.truth_commands import truth_views
 from app.truthplots import pose_error_text, scores_text
 from app.view3d import view3d_legend
 from autotrack.evaluation.metrics import score_sequence
@@ -31,13 +32,13 @@ def test_the_demo_scores_each_landmarks_target_against_its_ground_truth(tmp_path
     try:
         assert set(controller.landmark_truth) == set(controller.run.scene.landmark_ids)
         assert controller.has_truth and controller.truth is None
-        assert all(view.frames is None for view in controller.truth_views())  # no target yet
+        assert all(view.frames is None for view in truth_views(controller))  # no target yet
         controller.seek(2)
         controller.start_from_truth()  # one target per landmark, from its box on frame 3
         run = controller.run
         assert len(run.targets) == 4 and controller.cursor == 2
         controller.seek(9)
-        views = controller.truth_views()
+        views = truth_views(controller)
         assert [view.label for view in views] == [f"GT {lid}" for lid in run.scene.landmark_ids]
         for view in views:  # the library's metrics on the frames the target tracked
             target = next(t for t in run.targets.values() if t.id == view.target_id)

@@ -153,8 +153,8 @@ def test_a_video_played_live_is_tracked_on_its_newest_frames_recorded_and_reopen
     name, content = controller.export("mcap")  # the downloads are the live recording's
     assert name == path.name and content[:8] == path.read_bytes()[:8]
     # ... and so does reopening it from the Session list.
-    controller.refresh_sessions()
-    controller.reopen(path.name)
+    controller.sessions.refresh()
+    controller.sessions.reopen(path.name)
     assert controller.run.frames.recorded_indices == tuple(recorded)
     assert len(list((tmp_path / "sessions").glob("*.mcap"))) == 1
     controller.close()
