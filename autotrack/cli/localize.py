@@ -27,7 +27,7 @@ from autotrack.localization.scene import load_scene, scene_warnings
 from autotrack.params import PRESETS, preset
 
 if TYPE_CHECKING:
-    pass
+    from autotrack.pipeline import Recording
 
 
 def add_parser(subparsers: argparse._SubParsersAction) -> None:
@@ -190,6 +190,20 @@ def _choose_concurrency(args: argparse.Namespace, target_count: int) -> None:
     args.threads, args.processes = chosen_concurrency(args.threads, args.processes, target_count)
 
 
+def _recording(args: argparse.Namespace, scene_path: Path) -> Recording | None:
+    """The session `--session` asks for (None without it)."""
+    from autotrack.pipeline import Recording
+
+    if args.session is None:
+        return None
+    return Recording(
+        source=str(args.sequence),
+        path=args.session,
+        scene_path=scene_path,
+        embed_frames=not args.no_frames,
+    )
+
+
 def run_localize(args: argparse.Namespace) -> int:
     clock = StartupClock()
     from autotrack.io.frames import open_frames
@@ -198,7 +212,7 @@ def run_localize(args: argparse.Namespace) -> int:
     from autotrack.localization.reacquire import ReacquireParams
     from autotrack.localization.refine import RefineParams
     from autotrack.localization.smoothing import SmootherParams
-    from autotrack.pipeline import Recording, localize_sequence
+    from autotrack.pipeline import localize_sequence
     from autotrack.pipeline.outcomes import OutcomeLog
 
     _check_arguments(args)
@@ -228,14 +242,7 @@ def run_localize(args: argparse.Namespace) -> int:
     if fps <= 0:
         raise InputError("--fps must be positive")
     smoother = SmootherParams(fps=fps, lag_frames=args.smooth_lag) if args.smoothed else None
-    recording = None
-    if args.session is not None:
-        recording = Recording(
-            source=str(args.sequence),
-            path=args.session,
-            scene_path=scene_path,
-            embed_frames=not args.no_frames,
-        )
+    recording = _recording(args, scene_path)
     records = OutcomeLog(scene.landmark_ids)
     progress = tqdm(total=len(frames), unit="frame", desc=frames.name, disable=args.quiet)
     with frames, progress:
