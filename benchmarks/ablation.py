@@ -27,12 +27,24 @@ from multiprocessing import get_context
 from pathlib import Path
 
 import numpy as np
+from hybrid_ablation import (
+    FAITHFUL,
+    HYBRID,
+    HYBRID_VARIANTS,
+    NANOTRACK,
+    PLUS,
+    build_hybrid_table,
+    hybrid_variants,
+    mean_scores,
+    new_box_tracker,
+    speed_1280x720,
+)
 
 from autotrack.evaluation.benchmark import run_task
 from autotrack.evaluation.datasets import load_sequences
 from autotrack.evaluation.metrics import score_sequence
 from autotrack.evaluation.peers import AutoTrackPeer
-from autotrack.evaluation.runs import SINGLE_THREAD_ENVIRONMENT, single_thread, track_timed
+from autotrack.evaluation.runs import SINGLE_THREAD_ENVIRONMENT, track_timed
 from autotrack.io.otb_boxes import read_boxes, write_boxes
 from autotrack.params import PRESETS
 
@@ -42,8 +54,6 @@ OFFICIAL = SHARED / "reference" / "autotrack_official"
 DOC = REPO / "docs" / "benchmarks.md"
 START, END = "<!-- ablation:start -->", "<!-- ablation:end -->"
 
-FAITHFUL = "autotrack"
-PLUS = "autotrack+"
 
 ABLATION: dict[str, dict] = {
     FAITHFUL: {},
@@ -85,33 +95,6 @@ CANDIDATES: dict[str, dict] = {
 }
 """Switches measured on top of `autotrack+` but left out of the preset (docs/benchmarks.md);
 their parameters' sensitivity is taken around these variants."""
-
-
-NANOTRACK = "nanotrack"
-HYBRID = "hybrid"
-HYBRID_VARIANTS: dict[str, dict] = {
-    HYBRID: {},
-    f"{HYBRID} without box averaging": {"average_boxes": False},
-    f"{HYBRID} with filter re-initialisation": {"reinit_filter": True},
-    f"{HYBRID} without Siamese re-placing": {"place_siamese": False},
-    f"{HYBRID} without continuity": {"continuity": False},
-}
-"""The hybrid tracker and each of its fusion switches off (`autotrack.hybrid.HybridParams`)."""
-HYBRID_SENSITIVE = ("agree_radius", "siamese_confident")
-"""The hybrid's numeric parameters, halved and doubled in the sensitivity rows."""
-
-
-def hybrid_variants(sensitivity: bool) -> dict[str, dict]:
-    """Hybrid label -> `HybridParams` overrides: the switches, then the sensitivity rows."""
-    from autotrack.hybrid import HybridParams
-
-    table = dict(HYBRID_VARIANTS)
-    if sensitivity:
-        for name in HYBRID_SENSITIVE:
-            value = getattr(HybridParams(), name)
-            for factor in (0.5, 2.0):
-                table[f"{HYBRID} {name} x{factor:g}"] = {name: value * factor}
-    return table
 
 
 def kind_of(label: str) -> str:
@@ -206,17 +189,6 @@ def _task(kind: str, overrides: dict, sequence):
     return track(overrides, sequence)
 
 
-def new_box_tracker(kind: str, overrides: dict):
-    """NanoTrack, or the hybrid with `HybridParams` overrides, returning boxes."""
-    from autotrack.hybrid import HybridParams, HybridTracker
-    from autotrack.hybrid.factory import BoxesOf
-    from autotrack.nanotrack import NanoTrack
-
-    if kind == NANOTRACK:
-        return BoxesOf(NanoTrack())
-    return BoxesOf(HybridTracker(replace(HybridParams(), **overrides)))
-
-
 def _paths(out: Path, folder: str, sequence) -> tuple[Path, Path]:
     base = out / folder / f"{sequence.dataset}__{sequence.name}"
     return base.with_suffix(".txt"), base.with_suffix(".time.json")
@@ -289,13 +261,6 @@ def _official(sequences) -> dict:
     return scores
 
 
-def _mean(scores: dict, names) -> tuple[float, float]:
-    return (
-        float(np.mean([scores[n].precision for n in names])),
-        float(np.mean([scores[n].auc for n in names])),
-    )
-
-
 def _fps(runs: dict) -> float:
     return float(np.median([len(times) / np.sum(times) for _, times in runs.values()]))
 
@@ -313,11 +278,11 @@ def build_tables(sequences, results: dict, table: dict[str, dict]) -> str:
         "| variant | P@20 | AUC | ΔP@20 | ΔAUC | worse on | fps (median) |",
         "|---|---|---|---|---|---|---|",
     ]
-    base_p, base_auc = _mean(faithful, names)
+    base_p, base_auc = mean_scores(faithful, names)
     order = [*ABLATION, PLUS, *LEAVE_OUTS, *CANDIDATES, "csrt"]
     labels = [label for label in order if label in results]
     for label in labels:
-        p, a = _mean(scores[label], names)
+        p, a = mean_scores(scores[label], names)
         worse = sum(scores[label][n].auc < faithful[n].auc - 0.01 for n in names)
         strict = sum(scores[label][n].auc < faithful[n].auc for n in names)
         name = "OpenCV CSRT" if label == "csrt" else label
@@ -326,9 +291,9 @@ def build_tables(sequences, results: dict, table: dict[str, dict]) -> str:
             f"{worse} ({strict}) | {_fps(results[label]):.1f} |"
         )
     with_official = [n for n in names if n in official]
-    op, oa = _mean(official, with_official)
-    fp, fa = _mean(faithful, with_official)
-    pp, pa = _mean(scores[PLUS], with_official)
+    op, oa = mean_scores(official, with_official)
+    fp, fa = mean_scores(faithful, with_official)
+    pp, pa = mean_scores(scores[PLUS], with_official)
     lines += [
         "",
         f"On the {len(with_official)} sequences with the authors' own outputs: official "
@@ -382,14 +347,14 @@ def _sensitivity_lines(results: dict, scores: dict, names: list[str]) -> list[st
         for base, name, value in sensitivity_bases():
             if base not in scores:
                 continue
-            base_p, base_a = _mean(scores[base], names)
+            base_p, base_a = mean_scores(scores[base], names)
             cells = []
             for factor in (0.5, 2.0):
                 label = f"{PLUS} {name} x{factor:g}"
                 if label not in scores:
                     cells.append("not run")
                     continue
-                p, a = _mean(scores[label], names)
+                p, a = mean_scores(scores[label], names)
                 cells.append(f"{p:.3f} / {a:.3f} ({p - base_p:+.3f} / {a - base_a:+.3f})")
             lines.append(
                 f"| {base} | `{name}` | {value:g} | {base_p:.3f} / {base_a:.3f} | "
@@ -397,103 +362,6 @@ def _sensitivity_lines(results: dict, scores: dict, names: list[str]) -> list[st
                 + " |"
             )
     return lines
-
-
-def _hybrid_row(label: str, scores: dict, names: list[str], results: dict) -> str:
-    p, a = _mean(scores[label], names)
-    nano = scores[NANOTRACK]
-    worse = [n for n in names if scores[label][n].auc < nano[n].auc - 0.05]
-    return (
-        f"| {label} | {p:.3f} | {a:.3f} | {len(worse)} {' '.join(worse)} | "
-        f"{_fps(results[label]):.1f} |"
-    )
-
-
-def build_hybrid_table(sequences, results: dict) -> str:
-    """The hybrid's table: each tracker's mean and per-sequence scores, the sequences where it
-    is worse than NanoTrack by more than 0.05 AUC, its sensitivity rows."""
-    names = [s.name for s in sequences]
-    scores = {label: _scores(sequences, runs) for label, runs in results.items()}
-    main = [FAITHFUL, PLUS, "csrt", NANOTRACK, *HYBRID_VARIANTS]
-    labels = [label for label in main if label in results]
-    lines = [
-        f"{len(sequences)} sequences, {sum(len(s) for s in sequences)} frames, one thread per "
-        "tracker process. *worse than NanoTrack*: sequences whose AUC is below NanoTrack's by "
-        "more than 0.05.",
-        "",
-        "| tracker | P@20 | AUC | worse than NanoTrack | fps (median) |",
-        "|---|---|---|---|---|",
-        *(_hybrid_row(label, scores, names, results) for label in labels),
-        "",
-        "Per sequence, AUC:",
-        "",
-        "| sequence | " + " | ".join(labels) + " |",
-        "|---|" + "---|" * len(labels),
-    ]
-    for sequence in sequences:
-        cells = [f"{scores[label][sequence.name].auc:.3f}" for label in labels]
-        lines.append(f"| {sequence.dataset}/{sequence.name} | " + " | ".join(cells) + " |")
-    sensitivity = [label for label in results if label.startswith(f"{HYBRID} ") and " x" in label]
-    if sensitivity:
-        base_p, base_a = _mean(scores[HYBRID], names)
-        lines += [
-            "",
-            "Sensitivity of the hybrid: mean P@20 / AUC with one parameter halved or doubled.",
-            "",
-            "| parameter | x0.5 | x2 |",
-            "|---|---|---|",
-        ]
-        for name in HYBRID_SENSITIVE:
-            cells = []
-            for factor in (0.5, 2.0):
-                label = f"{HYBRID} {name} x{factor:g}"
-                if label not in scores:
-                    cells.append("not run")
-                    continue
-                p, a = _mean(scores[label], names)
-                cells.append(f"{p:.3f} / {a:.3f} ({p - base_p:+.3f} / {a - base_a:+.3f})")
-            lines.append(f"| `{name}` | " + " | ".join(cells) + " |")
-    return "\n".join(lines)
-
-
-def speed_1280x720(sequence, frames: int = 120, rounds: int = 2) -> str:
-    """Frames/s on one thread of NanoTrack, `autotrack+` and the hybrid on a sequence's frames
-    resized to 1280x720 (the box scaled alike), the three interleaved `rounds` times; the best
-    round's median frame time of each."""
-    import time
-
-    import cv2
-
-    from autotrack import AutoTrack, preset
-    from autotrack.hybrid import HybridTracker
-    from autotrack.nanotrack import NanoTrack
-
-    count = min(frames, len(sequence))
-    with sequence.frames() as source:
-        first = source.read(0)
-        images = [cv2.resize(source.read(i), (1280, 720)) for i in range(count)]
-    sx, sy = 1280 / first.shape[1], 720 / first.shape[0]
-    x, y, w, h = sequence.init_box
-    box = (x * sx, y * sy, w * sx, h * sy)
-    makers = {
-        NANOTRACK: NanoTrack,
-        PLUS: lambda: AutoTrack(preset(PLUS)),
-        HYBRID: HybridTracker,
-    }
-    best = dict.fromkeys(makers, 0.0)
-    with single_thread():
-        for _ in range(rounds):
-            for name, make in makers.items():
-                tracker = make()
-                tracker.init(images[0], box)
-                times = []
-                for image in images[1:]:
-                    start = time.perf_counter()
-                    tracker.update(image)
-                    times.append(time.perf_counter() - start)
-                best[name] = max(best[name], 1.0 / float(np.median(times)))
-    cells = ", ".join(f"{name} {fps:.1f}" for name, fps in best.items())
-    return f"1280x720, one thread, {sequence.name} ({count} frames): frames/s {cells}"
 
 
 def update_doc(tables: str) -> None:
@@ -524,7 +392,9 @@ def main() -> None:
         if args.only:
             hybrid_table = {k: v for k, v in hybrid_table.items() if k in args.only.split(",")}
         results = run_all(sequences, hybrid_table, args.out, args.jobs, args.resume_only)
-        print(build_hybrid_table(sequences, results))
+        scores = {label: _scores(sequences, runs) for label, runs in results.items()}
+        fps = {label: _fps(runs) for label, runs in results.items()}
+        print(build_hybrid_table(sequences, scores, fps))
         if args.speed:
             print(speed_1280x720(next(s for s in sequences if s.name == "S1301")))
         return
