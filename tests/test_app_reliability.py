@@ -456,3 +456,13 @@ def test_another_browsers_upload_is_refused_like_a_missing_path(tmp_path: Path) 
         assert "no such file or folder among those this server may open" in refusals[0]
     finally:
         server.stop()
+
+
+def test_a_jpeg_given_as_the_scene_file_gets_a_clear_message(studio) -> None:
+    """Issue 42 item 10: a JPEG as the scene file gave "internal error"."""
+    tab, channel = _open_tab(studio)
+    tab.worker.submit(tab.controller.use_scene, "demo/img/00001.jpg")
+    assert tab.wait_idle()
+    message, error = channel.notes[-1]
+    assert error and message == "scene file demo/img/00001.jpg is not a JSON text file"
+    assert tab.controller.run is not None and tab.controller.run.scene is not None  # kept
