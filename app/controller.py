@@ -185,10 +185,7 @@ class TabController:
     def resolve_path(self, text: str) -> Path:
         """A path the user typed (or a session names), under this tab's folders and not in
         another browser's space (app/owners.py)."""
-        path = resolve_user_path(text, self.roots)
-        if self.space.hides(path):
-            raise InputError(f"{text}: no such file or folder among those this tab may open")
-        return path
+        return resolve_user_path(text, self.roots, hides=self.space.hides)
 
     def choose_preset(self, name: str) -> None:
         """Use tracker preset `name` from the next target on (app/tracker_choice.py)."""

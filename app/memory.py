@@ -10,7 +10,6 @@ from __future__ import annotations
 import ctypes
 import ctypes.util
 import gc
-import os
 from functools import cache
 
 
@@ -22,23 +21,6 @@ def _libc() -> ctypes.CDLL | None:
     except OSError:
         return None
     return libc if hasattr(libc, "malloc_trim") else None
-
-
-M_ARENA_MAX = -8
-"""glibc's mallopt parameter for the most malloc arenas (malloc.h)."""
-SERVER_ARENAS = 2
-"""Arenas a server keeps: glibc's default (8 per core) lets each tab's threads take arenas
-whose freed pages stay scattered; two measured +4 MB over a 3,000-frame, 8-tab churn against
-+18 MB (benchmarks/tab_churn.py)."""
-
-
-def limit_malloc_arenas(arenas: int = SERVER_ARENAS) -> bool:
-    """Cap glibc's malloc arenas for the threads started from now on (a server's tabs); False
-    where the C library has no mallopt (not glibc). `MALLOC_ARENA_MAX`, if set, wins."""
-    libc = _libc()
-    if libc is None or not hasattr(libc, "mallopt") or "MALLOC_ARENA_MAX" in os.environ:
-        return False
-    return bool(libc.mallopt(M_ARENA_MAX, arenas))
 
 
 def release_freed_memory() -> bool:

@@ -18,7 +18,7 @@ import tempfile
 import time
 import zipfile
 import zlib
-from collections.abc import Iterable, Sequence
+from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass
 from io import BytesIO
 from pathlib import Path, PurePosixPath
@@ -85,12 +85,15 @@ def is_under(path: Path, roots: Sequence[Path]) -> bool:
     return any(path == root or path.is_relative_to(root) for root in roots)
 
 
-def resolve_user_path(text: str, roots: Sequence[Path]) -> Path:
+def resolve_user_path(
+    text: str, roots: Sequence[Path], hides: Callable[[Path], bool] | None = None
+) -> Path:
     """The existing file or folder a browser user typed, restricted to the allowed roots.
 
     Relative paths are taken relative to each root in turn. `~` is not expanded: the server's
     home folder is none of the user's business. A path outside the roots gets the same message
-    whether or not it exists, so the browser cannot probe the server's file system.
+    whether or not it exists, so the browser cannot probe the server's file system; so does a
+    path `hides` says is not this user's (another browser's upload).
     """
     cleaned = text.strip()
     if not cleaned:
@@ -105,7 +108,7 @@ def resolve_user_path(text: str, roots: Sequence[Path]) -> Path:
             resolved = candidate.resolve(strict=True)
         except (FileNotFoundError, NotADirectoryError, RuntimeError, OSError):
             continue
-        if is_under(resolved, roots):
+        if is_under(resolved, roots) and not (hides is not None and hides(resolved)):
             return resolved
     raise InputError(
         f"{readable(_clipped(cleaned))}: no such file or folder among those this server may "

@@ -16,7 +16,7 @@ import viser
 from app.access import AccessGuard
 from app.channel import ClientChannel, ViserClientChannel
 from app.config import AppConfig
-from app.memory import limit_malloc_arenas, release_freed_memory
+from app.memory import release_freed_memory
 from app.owners import BrowserSpace, browser_tag
 from app.recordings import RecordingRegistry
 from app.startup import KernelWarmUp
@@ -34,7 +34,6 @@ class StudioServer:
 
     def __init__(self, config: AppConfig) -> None:
         check_viser_version()
-        limit_malloc_arenas()  # before viser's and the tabs' threads start
         self.config = config
         config.sessions_dir.mkdir(parents=True, exist_ok=True)
         self.roots = config.browsable_roots()

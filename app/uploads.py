@@ -7,8 +7,10 @@ upload messages of a tab's GUI (`FileTransferStartUpload`, `FileTransferPart`): 
 refused at its start when its declared size, its type, the uploads quota or the free disk space
 say no; its parts are appended to a file under `incoming/` in order, and a part out of order or
 beyond the declared size ends it. Memory per transfer is one 512 kB part. A refused, broken or
-abandoned (tab closed) transfer's file is deleted at once, and leftovers of a killed server are
-deleted when the next one starts.
+abandoned (tab closed) transfer's file is deleted at once, a stalled one (nothing for
+`UploadLimits.idle_seconds`) when the next transfer starts, and leftovers of a killed server
+when the next one starts. One browser has one transfer in flight. viser's messages are
+reached through app/viser_private.py; a GUI's websocket is let go when its last tab closes.
 """
 
 from __future__ import annotations

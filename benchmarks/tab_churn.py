@@ -4,8 +4,10 @@ Starts the app's server in this process on a ping-pong copy of the embedded demo
 frames forward, back, forward, ... so a tab can play as many frames as asked), then for each
 tab: a websocket opens it as a browser would (tests/browser_socket.py), the demo's four boxes
 are drawn on frame 1, the tab tracks `frames / tabs` frames and its websocket closes. After each
-close it waits for the Tab to be freed and prints the server's RSS and the live Tab objects;
-at the end the RSS growth since the first tab closed.
+close it waits for the Tab to be freed and prints the server's RSS, the live Tab objects and
+the count of Python objects; at the end the RSS growth since the first tab closed. glibc's
+per-thread malloc arenas keep freed pages scattered: run with `MALLOC_ARENA_MAX=2` to see the
+allocator's share.
 
     python benchmarks/tab_churn.py [--tabs 8] [--frames 3000]
 """
@@ -112,7 +114,11 @@ def main() -> None:
                 rss = rss_mb()
                 first = rss if first is None else first
                 alive = sum(reference() is not None for reference in references)
-                print(f"tab {cycle + 1}: RSS {rss:.1f} MB ({rss - first:+.1f}), live tabs {alive}")
+                objects = len(gc.get_objects())
+                print(
+                    f"tab {cycle + 1}: RSS {rss:.1f} MB ({rss - first:+.1f}), live tabs {alive}, "
+                    f"Python objects {objects}"
+                )
         finally:
             server.stop()
         print(f"growth after the first tab: {rss - first:+.1f} MB over {args.tabs - 1} tabs")

@@ -26,6 +26,7 @@ import pytest
 from app.browser_text import readable
 from app.canvas import fit_letterbox, letterbox_image
 from app.config import AppConfig
+from app.owners import browser_tag
 from app.paths import PARTIAL_PREFIX, UploadLimits, find_sequences, store_upload
 from app.viser_private import UploadPart, UploadStart, deliver_as_client, upload_button_id
 from autotrack.errors import InputError, SessionError
@@ -432,3 +433,37 @@ def test_every_malformed_token_or_header_gets_403(studio, lines) -> None:
     port = studio.port
     assert _status_of(port, ["GET /?token=secret-token HTTP/1.1", "Host: 127.0.0.1"]) == 200
     assert _status_of(port, [line.replace("PORT", str(port)) for line in lines]) == 403
+
+
+def test_another_browsers_upload_is_refused_like_a_missing_path(tmp_path: Path) -> None:
+    """Issue 42 item 10: a path in another browser's space got a different refusal text than a
+    missing one (telling that it exists)."""
+    from app.server import StudioServer
+
+    sessions = tmp_path / "sessions"
+    config = AppConfig(
+        port=0, sessions_dir=sessions, allowed_roots=(sessions,), demo_dir=DEMO, token="t"
+    )
+    server = StudioServer(config)
+    try:
+        alices = _frames_folder(config.upload_dir / f"browser-{browser_tag('alice')}" / "clip", 2)
+        tab, channel = _open_tab(server, browser="bob")
+        refusals = []
+        for typed in (alices, alices.with_name("nothing-here")):
+            tab.worker.submit(tab.controller.open_typed, str(typed))
+            assert tab.wait_idle()
+            refusals.append(channel.notes[-1][0].replace(typed.name, "NAME"))
+        assert refusals[0] == refusals[1]
+        assert "no such file or folder among those this server may open" in refusals[0]
+    finally:
+        server.stop()
+
+
+def test_a_jpeg_given_as_the_scene_file_gets_a_clear_message(studio) -> None:
+    """Issue 42 item 10: a JPEG as the scene file gave "internal error"."""
+    tab, channel = _open_tab(studio)
+    tab.worker.submit(tab.controller.use_scene, "demo/img/00001.jpg")
+    assert tab.wait_idle()
+    message, error = channel.notes[-1]
+    assert error and message == "scene file demo/img/00001.jpg is not a JSON text file"
+    assert tab.controller.run is not None and tab.controller.run.scene is not None  # kept

@@ -244,6 +244,8 @@ def load_scene(path: str | Path) -> Scene:
         text = path.read_text(encoding="utf-8")
     except OSError as error:
         raise SceneError(f"cannot read scene file {path}: {error.strerror or error}") from None
+    except UnicodeDecodeError:  # an image or other binary file picked by mistake
+        raise SceneError(f"scene file {path} is not a JSON text file") from None
     try:
         data = json.loads(text)
     except json.JSONDecodeError as error:
