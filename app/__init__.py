@@ -2,8 +2,8 @@
 
 Start it with `autotrack app`, or from Python:
 
->>> from app.config import AppConfig
->>> from app.server import StudioServer
+>>> from autotrack_studio.config import AppConfig
+>>> from autotrack_studio.server import StudioServer
 >>> studio = StudioServer(AppConfig(port=8080))   # doctest: +SKIP
 >>> print(studio.url)                              # doctest: +SKIP
 

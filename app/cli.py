@@ -187,8 +187,10 @@ def run(args: argparse.Namespace) -> int:
     check_bindable(args.host)
     port = free_port(args.host, args.port)
 
-    from app.config import AppConfig  # the app's modules (and viser) load only when it starts
-    from app.server import StudioServer
+    from autotrack_studio.config import (
+        AppConfig,  # the app's modules (and viser) load only when it starts
+    )
+    from autotrack_studio.server import StudioServer
 
     config = AppConfig(
         sequence=None if args.sequence is None else args.sequence.resolve(),

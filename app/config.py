@@ -5,9 +5,9 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from app.access import new_token
-from app.paths import UploadLimits, normalise_roots
 from autotrack.userdirs import default_sessions_dir
+from autotrack_studio.access import new_token
+from autotrack_studio.paths import UploadLimits, normalise_roots
 
 
 def _embedded_demo() -> Path:

@@ -16,24 +16,6 @@ from pathlib import Path
 
 import numpy as np
 
-from app import exports
-from app.boxes import Box, ground_truth_positions, overlapped_target
-from app.config import AppConfig
-from app.groundtruth import (
-    TruthPoses,
-    charted_view,
-    load_landmark_truth,
-    load_truth,
-    load_truth_poses,
-)
-from app.landmarks import LandmarkTies, load_boxes_json, search_message
-from app.owners import BrowserSpace
-from app.paths import display_name, find_sequences, resolve_user_path, store_upload
-from app.recordings import RecordingRegistry
-from app.reopening import SessionList
-from app.tracker_choice import TrackerChoice
-from app.truth_commands import start_from_truth, truth_views
-from app.views import FrameView, frame_view
 from autotrack.errors import InputError
 from autotrack.io.frames import FrameSource, open_frames
 from autotrack.localization.reacquire import ReacquireParams
@@ -43,6 +25,24 @@ from autotrack.params import preset
 from autotrack.pipeline import Pipeline, Recording, TrackedTarget
 from autotrack.sessions import Session
 from autotrack.tracker.parallel.target_process import WorkerPool
+from autotrack_studio import exports
+from autotrack_studio.boxes import Box, ground_truth_positions, overlapped_target
+from autotrack_studio.config import AppConfig
+from autotrack_studio.groundtruth import (
+    TruthPoses,
+    charted_view,
+    load_landmark_truth,
+    load_truth,
+    load_truth_poses,
+)
+from autotrack_studio.landmarks import LandmarkTies, load_boxes_json, search_message
+from autotrack_studio.owners import BrowserSpace
+from autotrack_studio.paths import display_name, find_sequences, resolve_user_path, store_upload
+from autotrack_studio.recordings import RecordingRegistry
+from autotrack_studio.reopening import SessionList
+from autotrack_studio.tracker_choice import TrackerChoice
+from autotrack_studio.truth_commands import start_from_truth, truth_views
+from autotrack_studio.views import FrameView, frame_view
 
 POSE_OPTIONS = {"refine_params": RefineParams(), "reacquire_params": ReacquireParams()}
 """With a scene, the pipeline gives the solver sub-pixel landmark points and re-acquires lost
@@ -463,7 +463,7 @@ class TabController:
             self.visit(target)
 
     def export(self, what: str) -> tuple[str, bytes]:
-        """(file name, content) of a download: 'tracks', 'poses' or 'mcap' (app.exports)."""
+        """(file name, content) of a download: 'tracks', 'poses' or 'mcap' (autotrack_studio.exports)."""
         name, content = exports.build(self.require_run(), what)
         self.message = f"Sent {name} ({len(content) / 1024:.0f} kB)."
         return name, content

@@ -18,7 +18,7 @@ from dataclasses import dataclass, field
 import numpy as np
 import viser
 
-from app.canvas import (
+from autotrack_studio.canvas import (
     Letterbox,
     draw_overlays,
     fit_letterbox,
@@ -26,9 +26,9 @@ from app.canvas import (
     map_tile,
     thumbnail,
 )
-from app.channel import ClientChannel
-from app.groundtruth import pose_errors
-from app.panels import (
+from autotrack_studio.channel import ClientChannel
+from autotrack_studio.groundtruth import pose_errors
+from autotrack_studio.panels import (
     CANVAS_3D,
     CANVAS_FRAME,
     MAP_KINDS,
@@ -37,11 +37,11 @@ from app.panels import (
     ZOOM_FOLLOW,
     Panels,
 )
-from app.plots import SignalPlots
-from app.truthplots import TruthPlots
-from app.view3d import SceneView, view3d_legend
-from app.views import FrameView, smoothed_view
-from app.zoom import CanvasMapping, ZoomWindow, canvas_mapping, zoom_window
+from autotrack_studio.plots import SignalPlots
+from autotrack_studio.truthplots import TruthPlots
+from autotrack_studio.view3d import SceneView, view3d_legend
+from autotrack_studio.views import FrameView, smoothed_view
+from autotrack_studio.zoom import CanvasMapping, ZoomWindow, canvas_mapping, zoom_window
 
 GUI_FPS = 30.0
 """Most video-panel updates per second (viser keeps only the latest anyway)."""

@@ -14,8 +14,8 @@ from autotrack.localization.pnp import Correspondence, boxes_by_landmark, rank_c
 from autotrack.pipeline import Pipeline
 
 if TYPE_CHECKING:
-    from app.boxes import Box
-    from app.controller import TabController
+    from autotrack_studio.boxes import Box
+    from autotrack_studio.controller import TabController
 
 MIN_POINTS = 4
 """The search needs four boxes (P3P on three, the fourth to check)."""

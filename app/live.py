@@ -19,11 +19,6 @@ from pathlib import Path
 
 import numpy as np
 
-from app.browser_text import markdown_literal
-from app.controller import POSE_OPTIONS, TabController
-from app.landmarks import boxes_json_boxes
-from app.paths import display_name, live_source
-from app.views import FrameView, SignalHistory
 from autotrack.errors import AutoTrackError, InputError
 from autotrack.io.live import CapturedFrame, LiveFrames, LiveLog, LiveReader, describe_source
 from autotrack.localization.scene import Scene, load_scene
@@ -31,6 +26,11 @@ from autotrack.params import preset
 from autotrack.pipeline import Pipeline, Recording
 from autotrack.pipeline.live import follow_live
 from autotrack.pipeline.targets import FrameOutcome
+from autotrack_studio.browser_text import markdown_literal
+from autotrack_studio.controller import POSE_OPTIONS, TabController
+from autotrack_studio.landmarks import boxes_json_boxes
+from autotrack_studio.paths import display_name, live_source
+from autotrack_studio.views import FrameView, SignalHistory
 
 DISABLED_HINT = "Live sources are off on this server: restart it with `autotrack app --allow-live`."
 DEFAULT_LIVE_FPS = 30.0

@@ -12,16 +12,16 @@ from dataclasses import dataclass
 import numpy as np
 import viser
 
-from app.boxes import format_box
-from app.browser_text import markdown_literal
-from app.config import AppConfig
-from app.controller import TabController
-from app.live import DISABLED_HINT, FROZEN, OFF, PREVIEW, TRACKING, LiveControl
-from app.paths import display_name
-from app.quiet import QuietWrites
-from app.targets_table import targets_table
-from app.zoom import MAX_ZOOM
 from autotrack.params import PRESETS
+from autotrack_studio.boxes import format_box
+from autotrack_studio.browser_text import markdown_literal
+from autotrack_studio.config import AppConfig
+from autotrack_studio.controller import TabController
+from autotrack_studio.live import DISABLED_HINT, FROZEN, OFF, PREVIEW, TRACKING, LiveControl
+from autotrack_studio.paths import display_name
+from autotrack_studio.quiet import QuietWrites
+from autotrack_studio.targets_table import targets_table
+from autotrack_studio.zoom import MAX_ZOOM
 
 NEW_TARGET = "new target"
 NO_LANDMARK = "none"

@@ -23,10 +23,10 @@ from dataclasses import dataclass
 from io import BytesIO
 from pathlib import Path, PurePosixPath
 
-from app.browser_text import readable
-from app.owners import SPACE_PREFIX
 from autotrack.errors import InputError
 from autotrack.io.frames import IMAGE_EXTENSIONS, VIDEO_EXTENSIONS
+from autotrack_studio.browser_text import readable
+from autotrack_studio.owners import SPACE_PREFIX
 
 IMAGE_SUFFIXES = IMAGE_EXTENSIONS
 """Image files a sequence folder may hold (the frame reader's list)."""

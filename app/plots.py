@@ -25,9 +25,9 @@ import numpy as np
 import viser
 import viser.uplot
 
-from app.canvas import target_colour
-from app.views import SignalHistory
-from app.viser_private import send_uplot_data
+from autotrack_studio.canvas import target_colour
+from autotrack_studio.views import SignalHistory
+from autotrack_studio.viser_private import send_uplot_data
 
 ABERRANT_COLOUR = "#e03131"
 CURSOR_COLOUR = "#495057"

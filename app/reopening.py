@@ -2,7 +2,7 @@
 session file, or looking through a live run's recording on its own frames), and point a new
 tab of a browser to the session it recorded last (a page reload closes the tab it replaces).
 
-`SessionList` is a collaborator of `app.controller.TabController`: it holds the list and uses
+`SessionList` is a collaborator of `autotrack_studio.controller.TabController`: it holds the list and uses
 the controller only through its public interface (`space`, `recordings`, `tab_id`,
 `resolve_path`, `load_frames`, `new_run`, `new_recording`, `install_run`, `close_run`,
 `claim_recording`, `cursor`, `message`, `file_run`).
@@ -13,15 +13,15 @@ from __future__ import annotations
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from app.browser_text import readable
-from app.paths import check_writable
 from autotrack.errors import InputError
 from autotrack.localization.scene import load_scene
 from autotrack.sessions import open_session
 from autotrack.sessions.frames import EmbeddedFrames
+from autotrack_studio.browser_text import readable
+from autotrack_studio.paths import check_writable
 
 if TYPE_CHECKING:
-    from app.controller import TabController
+    from autotrack_studio.controller import TabController
 
 
 class SessionList:

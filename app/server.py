@@ -13,18 +13,18 @@ import threading
 
 import viser
 
-from app.access import AccessGuard
-from app.channel import ClientChannel, ViserClientChannel
-from app.config import AppConfig
-from app.memory import release_freed_memory
-from app.owners import BrowserSpace, browser_tag
-from app.recordings import RecordingRegistry
-from app.startup import KernelWarmUp
-from app.tab import Tab
-from app.uploads import UploadReceiver
-from app.viser_private import check_viser_version, guard_handshakes, handshake_headers
 from autotrack.errors import AutoTrackError
 from autotrack.tracker.parallel.target_process import WorkerPool
+from autotrack_studio.access import AccessGuard
+from autotrack_studio.channel import ClientChannel, ViserClientChannel
+from autotrack_studio.config import AppConfig
+from autotrack_studio.memory import release_freed_memory
+from autotrack_studio.owners import BrowserSpace, browser_tag
+from autotrack_studio.recordings import RecordingRegistry
+from autotrack_studio.startup import KernelWarmUp
+from autotrack_studio.tab import Tab
+from autotrack_studio.uploads import UploadReceiver
+from autotrack_studio.viser_private import check_viser_version, guard_handshakes, handshake_headers
 
 LOG = logging.getLogger(__name__)
 

@@ -16,14 +16,16 @@ from pathlib import Path
 import numpy as np
 import viser
 
-from app.boxes import parse_box
-from app.channel import ClientChannel
-from app.config import AppConfig
-from app.controller import TabController
-from app.display import DEFAULT_CANVAS_SIZE, DisplayLoop
-from app.live import FROZEN, OFF, PREVIEW, LiveControl
-from app.owners import BrowserSpace
-from app.panels import (
+from autotrack.errors import InputError
+from autotrack.tracker.parallel.target_process import WorkerPool
+from autotrack_studio.boxes import parse_box
+from autotrack_studio.channel import ClientChannel
+from autotrack_studio.config import AppConfig
+from autotrack_studio.controller import TabController
+from autotrack_studio.display import DEFAULT_CANVAS_SIZE, DisplayLoop
+from autotrack_studio.live import FROZEN, OFF, PREVIEW, LiveControl
+from autotrack_studio.owners import BrowserSpace
+from autotrack_studio.panels import (
     CANVAS_3D,
     CANVAS_FRAME,
     MAPS_PANELS,
@@ -37,13 +39,11 @@ from app.panels import (
     show_state,
     show_targets,
 )
-from app.paths import shown_paths
-from app.recordings import RecordingRegistry
-from app.startup import KernelWarmUp
-from app.view3d import DEFAULT_FOV
-from app.worker import Worker
-from autotrack.errors import InputError
-from autotrack.tracker.parallel.target_process import WorkerPool
+from autotrack_studio.paths import shown_paths
+from autotrack_studio.recordings import RecordingRegistry
+from autotrack_studio.startup import KernelWarmUp
+from autotrack_studio.view3d import DEFAULT_FOV
+from autotrack_studio.worker import Worker
 
 TABLE_PERIOD = 0.5
 """Seconds between Targets-table updates while frames change (playing, tracking ahead)."""

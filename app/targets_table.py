@@ -5,8 +5,8 @@ from __future__ import annotations
 
 import math
 
-from app.boxes import Box
-from app.controller import TabController
+from autotrack_studio.boxes import Box
+from autotrack_studio.controller import TabController
 
 
 def compact_box(box: Box) -> str:

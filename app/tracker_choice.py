@@ -3,7 +3,7 @@ made again with the chosen preset (so the session records the parameters the tar
 track with); once targets track with another preset the page says so, and `restart` opens the
 sequence again with it on the current frame.
 
-`TrackerChoice` is a collaborator of `app.controller.TabController`, using its public
+`TrackerChoice` is a collaborator of `autotrack_studio.controller.TabController`, using its public
 interface only (`run`, `preset_name`, `message`, `cursor`, `file_run`, `sequence_path`,
 `scene_path`, `open`, `require_run`).
 """
@@ -16,7 +16,7 @@ from autotrack.errors import InputError
 from autotrack.params import PRESETS
 
 if TYPE_CHECKING:
-    from app.controller import TabController
+    from autotrack_studio.controller import TabController
 
 
 class TrackerChoice:

@@ -2,7 +2,7 @@
 groundtruth_rect.txt (the target scored against it), or every landmark's box of the
 per-landmark groundtruth/ a generated sequence (the demo) ships.
 
-Functions on `app.controller.TabController`'s public interface (`truth`, `landmark_truth`,
+Functions on `autotrack_studio.controller.TabController`'s public interface (`truth`, `landmark_truth`,
 `truth_target`, `cursor`, `config`, `message`, `tracker`, `require_run`, `stop_playing`,
 `claim_recording`).
 """
@@ -13,12 +13,12 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from app.groundtruth import TruthView, landmark_truth_views, truth_view
 from autotrack.errors import InputError
 from autotrack.pipeline import TrackedTarget
+from autotrack_studio.groundtruth import TruthView, landmark_truth_views, truth_view
 
 if TYPE_CHECKING:
-    from app.controller import TabController
+    from autotrack_studio.controller import TabController
 
 
 def start_from_truth(controller: TabController) -> None:

@@ -8,8 +8,9 @@ import numpy as np
 import viser
 import viser.uplot
 
-from app.groundtruth import PoseErrors, TruthView
-from app.plots import (
+from autotrack.evaluation.metrics import PRECISION_SCORE_THRESHOLD
+from autotrack_studio.groundtruth import PoseErrors, TruthView
+from autotrack_studio.plots import (
     CHART_PADDING,
     EMPTY_SCALES,
     chart_data,
@@ -18,7 +19,6 @@ from app.plots import (
     send_data,
     x_range,
 )
-from autotrack.evaluation.metrics import PRECISION_SCORE_THRESHOLD
 
 
 def scores_text(truth: TruthView | None, truths: tuple[TruthView, ...] = ()) -> str:

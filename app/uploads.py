@@ -27,14 +27,14 @@ from typing import BinaryIO
 
 import viser
 
-from app.paths import (
+from autotrack_studio.paths import (
     VIDEO_SUFFIXES,
     UploadLimits,
     folder_bytes,
     remove_partial_uploads,
     safe_file_name,
 )
-from app.viser_private import (
+from autotrack_studio.viser_private import (
     UploadHandlers,
     UploadPart,
     UploadStart,

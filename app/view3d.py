@@ -13,9 +13,9 @@ import numpy as np
 import viser
 from scipy.spatial.transform import Rotation
 
-from app.groundtruth import PoseErrors
-from app.views import PoseView
 from autotrack.localization.scene import Scene
+from autotrack_studio.groundtruth import PoseErrors
+from autotrack_studio.views import PoseView
 
 VALID_COLOUR = (40, 180, 60)
 INVALID_COLOUR = (220, 40, 40)

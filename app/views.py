@@ -11,14 +11,14 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from app.browser_text import markdown_literal
-from app.canvas import TargetDrawing, target_colour
-from app.groundtruth import TruthPoses, TruthView
 from autotrack.errors import SessionError
 from autotrack.localization.smoothing import SmootherParams, smoothed_positions
 from autotrack.pipeline import Pipeline, TrackedTarget
 from autotrack.result import PoseEstimate, TrackResult
 from autotrack.sessions.maps import FrameMaps
+from autotrack_studio.browser_text import markdown_literal
+from autotrack_studio.canvas import TargetDrawing, target_colour
+from autotrack_studio.groundtruth import TruthPoses, TruthView
 
 RecordedMaps = Callable[[str, int], FrameMaps | None]
 """(target id, frame) -> that target's maps on the frame as recorded (None: not at hand): where

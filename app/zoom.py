@@ -15,8 +15,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from app.boxes import Box
-from app.canvas import Letterbox, fit_letterbox
+from autotrack_studio.boxes import Box
+from autotrack_studio.canvas import Letterbox, fit_letterbox
 
 MAX_ZOOM = 8.0
 

@@ -25,8 +25,6 @@ from pathlib import Path
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
 
-from app.config import AppConfig  # noqa: E402
-from app.controller import POSE_OPTIONS  # noqa: E402
 from autotrack.io.boxes_json import read_boxes_json  # noqa: E402
 from autotrack.io.frames import open_frames  # noqa: E402
 from autotrack.localization.pnp import boxes_by_landmark  # noqa: E402
@@ -34,6 +32,8 @@ from autotrack.localization.scene import load_scene  # noqa: E402
 from autotrack.params import preset  # noqa: E402
 from autotrack.pipeline import Pipeline, Recording  # noqa: E402
 from autotrack.tracker.parallel.warmup import warm_up  # noqa: E402
+from autotrack_studio.config import AppConfig  # noqa: E402
+from autotrack_studio.controller import POSE_OPTIONS  # noqa: E402
 
 DEMO = REPO / "static" / "demo"
 
@@ -66,7 +66,7 @@ def trackers_alone(config: AppConfig, sessions: Path) -> float:
 
 def in_app(config: AppConfig, browser: bool, profile: Path) -> float:
     """Frames per second of a tab playing the demo with its four boxes, as fast as it goes."""
-    from app.server import StudioServer
+    from autotrack_studio.server import StudioServer
 
     server = StudioServer(config)
     server.warm_up.join()

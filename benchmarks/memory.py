@@ -127,10 +127,10 @@ def run_localize(settings: DriftSettings, keep_all: bool, trace: bool) -> None:
 
 
 def run_app(settings: DriftSettings, keep_all: bool, trace: bool) -> None:
-    from app.config import AppConfig
-    from app.controller import TabController
-    from app.memory import release_freed_memory
-    from app.recordings import RecordingRegistry
+    from autotrack_studio.config import AppConfig
+    from autotrack_studio.controller import TabController
+    from autotrack_studio.memory import release_freed_memory
+    from autotrack_studio.recordings import RecordingRegistry
 
     source = DriftingTexture(settings)
     with tempfile.TemporaryDirectory() as folder:

@@ -26,9 +26,9 @@ from pathlib import Path
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))  # tests/ holds the websocket browser and the drag helper
 
-from app.config import AppConfig  # noqa: E402
-from app.memory import release_freed_memory  # noqa: E402
-from app.server import StudioServer  # noqa: E402
+from autotrack_studio.config import AppConfig  # noqa: E402
+from autotrack_studio.memory import release_freed_memory  # noqa: E402
+from autotrack_studio.server import StudioServer  # noqa: E402
 from tests.browser_socket import SocketBrowser  # noqa: E402
 from tests.test_app import DEMO, _draw_demo_boxes  # noqa: E402
 

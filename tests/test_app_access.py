@@ -13,7 +13,7 @@ import viser
 import websockets.sync.client as ws_client
 from websockets.exceptions import InvalidStatus
 
-from app.config import AppConfig
+from autotrack_studio.config import AppConfig
 from tests.browser_socket import SocketBrowser
 
 DEMO = Path(__file__).resolve().parents[1] / "static" / "demo"
@@ -21,7 +21,7 @@ DEMO = Path(__file__).resolve().parents[1] / "static" / "demo"
 
 @pytest.fixture
 def studio(tmp_path: Path):
-    from app.server import StudioServer
+    from autotrack_studio.server import StudioServer
 
     (tmp_path / "demo").mkdir()
     server = StudioServer(
@@ -104,7 +104,7 @@ def test_the_apps_own_page_connects_with_its_cookie(studio) -> None:
 
 
 def test_no_token_serves_without_it(tmp_path: Path) -> None:
-    from app.server import StudioServer
+    from autotrack_studio.server import StudioServer
 
     (tmp_path / "demo").mkdir()
     studio = StudioServer(

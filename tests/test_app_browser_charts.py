@@ -63,7 +63,7 @@ def _charts(page) -> dict[str, dict]:
 
 
 def test_charts_are_made_once_as_wide_as_their_panel_and_readable(studio, tmp_path) -> None:  # noqa: F811
-    from app.plots import CHART_TITLES, decade_label
+    from autotrack_studio.plots import CHART_TITLES, decade_label
 
     with studio_page(studio, tmp_path / "profile") as (page, tab):
         controller = tab.controller

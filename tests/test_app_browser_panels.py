@@ -50,7 +50,7 @@ def test_the_targets_table_header_reads_on_one_line(studio, tmp_path) -> None:  
 
 
 def test_chart_legends_list_only_the_targets_that_exist(studio, tmp_path) -> None:  # noqa: F811
-    from app.plots import CHART_TITLES
+    from autotrack_studio.plots import CHART_TITLES
 
     with studio_page(studio, tmp_path / "profile") as (page, tab):
         _wait_for(lambda: len(page.evaluate(LEGENDS_JS)) == len(CHART_TITLES), what="charts")
@@ -76,7 +76,7 @@ def test_a_shift_click_says_how_to_draw_and_delete_says_what_enables_it(
 ) -> None:
     """A shift-click with no drag draws nothing (viser reports it as a click, not a box): the
     page tells the user to drag. The greyed Delete button says what enables it."""
-    from app.tab import DRAW_HINT
+    from autotrack_studio.tab import DRAW_HINT
 
     with studio_page(studio, tmp_path / "profile") as (page, tab):
         _wait_for(lambda: tab.display.letterbox is not None, what="the frame", tab=tab)

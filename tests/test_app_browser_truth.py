@@ -19,7 +19,7 @@ pytestmark = pytest.mark.browser
 
 
 def test_the_demo_ground_truth_is_scored_and_the_pose_error_shown(studio, tmp_path) -> None:  # noqa: F811
-    from app.panels import CANVAS_3D
+    from autotrack_studio.panels import CANVAS_3D
 
     ARTIFACTS.mkdir(exist_ok=True)
     with studio_page(studio, tmp_path / "profile") as (page, tab):

@@ -11,14 +11,14 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from app.groundtruth import TruthPoses, load_truth_poses, pose_errors
-from app.truth_commands import truth_views
-from app.truthplots import pose_error_text, scores_text
-from app.view3d import view3d_legend
 from autotrack.evaluation.metrics import score_sequence
 from autotrack.io.tum import read_tum
 from autotrack.localization.trajectory import trajectory_errors
 from autotrack.result import PoseEstimate
+from autotrack_studio.groundtruth import TruthPoses, load_truth_poses, pose_errors
+from autotrack_studio.truth_commands import truth_views
+from autotrack_studio.truthplots import pose_error_text, scores_text
+from autotrack_studio.view3d import view3d_legend
 from tests.test_app_controller import DEMO, _controller
 
 

@@ -13,15 +13,15 @@ import cv2
 import numpy as np
 import pytest
 
-from app.config import DEMO_DIR, AppConfig
-from app.controller import TabController
-from app.live import FROZEN, OFF, PREVIEW, TRACKING, LiveControl
-from app.paths import live_source
-from app.plots import chart_data, tracked_rows
-from app.recordings import RecordingRegistry
 from autotrack.errors import InputError
 from autotrack.io.frames import open_frames
 from autotrack.sessions import open_session
+from autotrack_studio.config import DEMO_DIR, AppConfig
+from autotrack_studio.controller import TabController
+from autotrack_studio.live import FROZEN, OFF, PREVIEW, TRACKING, LiveControl
+from autotrack_studio.paths import live_source
+from autotrack_studio.plots import chart_data, tracked_rows
+from autotrack_studio.recordings import RecordingRegistry
 
 VIDEO_FPS = 10.0
 
@@ -161,7 +161,7 @@ def test_a_video_played_live_is_tracked_on_its_newest_frames_recorded_and_reopen
 
 
 def test_live_sources_need_the_allow_live_flag(tmp_path: Path, media: Path) -> None:
-    from app.cli import add_parser
+    from autotrack_studio.cli import add_parser
 
     _controller, live = _live_tab(tmp_path, allowed=False)
     with pytest.raises(InputError, match="restart it with `autotrack app --allow-live`"):

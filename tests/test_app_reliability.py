@@ -23,13 +23,18 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from app.browser_text import readable
-from app.canvas import fit_letterbox, letterbox_image
-from app.config import AppConfig
-from app.owners import browser_tag
-from app.paths import PARTIAL_PREFIX, UploadLimits, find_sequences, store_upload
-from app.viser_private import UploadPart, UploadStart, deliver_as_client, upload_button_id
 from autotrack.errors import InputError, SessionError
+from autotrack_studio.browser_text import readable
+from autotrack_studio.canvas import fit_letterbox, letterbox_image
+from autotrack_studio.config import AppConfig
+from autotrack_studio.owners import browser_tag
+from autotrack_studio.paths import PARTIAL_PREFIX, UploadLimits, find_sequences, store_upload
+from autotrack_studio.viser_private import (
+    UploadPart,
+    UploadStart,
+    deliver_as_client,
+    upload_button_id,
+)
 from tests.browser_socket import SocketBrowser
 from tests.test_app import DEMO, _draw_demo_boxes, _open_tab
 
@@ -41,7 +46,7 @@ ROOT = "root"
 def studio(tmp_path: Path):
     if not (DEMO / "img").is_dir():
         pytest.skip("static/demo is missing")
-    from app.server import StudioServer
+    from autotrack_studio.server import StudioServer
 
     (tmp_path / ROOT).mkdir()
     server = StudioServer(
@@ -354,7 +359,7 @@ def test_a_stalled_upload_is_ended_and_one_browser_has_one_upload_in_flight(stud
 def test_a_half_stored_upload_is_hidden_and_removed_at_the_next_start(tmp_path: Path) -> None:
     """Issue 42 item 7: a server killed while unpacking left a partial upload that counted
     against the quota, was listed to its owner and opened as a shorter sequence."""
-    from app.server import StudioServer
+    from autotrack_studio.server import StudioServer
 
     config = AppConfig(port=0, sessions_dir=tmp_path / "sessions", demo_dir=DEMO, token="t")
     browser_uploads = config.upload_dir / "browser-0123456789abcdef"
@@ -438,7 +443,7 @@ def test_every_malformed_token_or_header_gets_403(studio, lines) -> None:
 def test_another_browsers_upload_is_refused_like_a_missing_path(tmp_path: Path) -> None:
     """Issue 42 item 10: a path in another browser's space got a different refusal text than a
     missing one (telling that it exists)."""
-    from app.server import StudioServer
+    from autotrack_studio.server import StudioServer
 
     sessions = tmp_path / "sessions"
     config = AppConfig(

@@ -11,8 +11,8 @@ from pathlib import Path
 import pytest
 import viser
 
-from app.config import AppConfig
-from app.startup import KernelWarmUp
+from autotrack_studio.config import AppConfig
+from autotrack_studio.startup import KernelWarmUp
 from tests.test_app import DEMO, _free_port, _wait_for
 
 
@@ -52,8 +52,8 @@ def test_a_failed_warm_up_ends_the_notice_and_says_why() -> None:
 @pytest.fixture
 def slow_studio(tmp_path: Path, monkeypatch):
     """A server whose kernel warm-up runs until the test releases it."""
-    from app import startup
-    from app.server import StudioServer
+    from autotrack_studio import startup
+    from autotrack_studio.server import StudioServer
 
     release = threading.Event()
     monkeypatch.setattr(startup, "warm_up", release.wait)

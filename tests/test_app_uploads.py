@@ -11,10 +11,15 @@ from pathlib import Path
 
 import pytest
 
-from app.config import AppConfig
-from app.paths import UploadLimits, store_upload
-from app.viser_private import UploadPart, UploadStart, deliver_as_client, upload_button_id
 from autotrack.errors import InputError
+from autotrack_studio.config import AppConfig
+from autotrack_studio.paths import UploadLimits, store_upload
+from autotrack_studio.viser_private import (
+    UploadPart,
+    UploadStart,
+    deliver_as_client,
+    upload_button_id,
+)
 from tests.test_app import DEMO, RecordingChannel
 
 PART = 512 * 1024
@@ -33,7 +38,7 @@ def _rss() -> int:
 def studio(tmp_path: Path):
     if not (DEMO / "img").is_dir():
         pytest.skip("static/demo is missing")
-    from app.server import StudioServer
+    from autotrack_studio.server import StudioServer
 
     leftover = tmp_path / "sessions" / ".incoming" / "123-killed.part"
     leftover.parent.mkdir(parents=True)

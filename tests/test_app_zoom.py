@@ -8,8 +8,8 @@ import numpy as np
 import pytest
 import viser
 
-from app.canvas import letterbox_image
-from app.zoom import MAX_ZOOM, ZoomWindow, canvas_mapping, zoom_window
+from autotrack_studio.canvas import letterbox_image
+from autotrack_studio.zoom import MAX_ZOOM, ZoomWindow, canvas_mapping, zoom_window
 from tests.test_app import _click, _open_tab, _set, _wait_for, studio  # noqa: F401
 
 

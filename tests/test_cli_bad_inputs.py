@@ -227,7 +227,7 @@ def test_app_with_every_port_taken_ends_in_one_line(workspace: Path, where: str)
     """viser would try port after port, then (or past 65535) wait forever."""
     import random
 
-    from app.cli import PORT_ATTEMPTS
+    from autotrack_studio.cli import PORT_ATTEMPTS
 
     count = PORT_ATTEMPTS if where == "a block of ports" else 4
     held: list = []

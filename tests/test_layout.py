@@ -48,8 +48,13 @@ def _relative(path: Path) -> str:
     return path.relative_to(ROOT).as_posix()
 
 
+IMPORT_NAME_OF_DIR = {"app": "autotrack_studio"}
+"""Source folders installed under another name (pyproject.toml's package-dir)."""
+
+
 def _module_name(path: Path) -> str:
     parts = path.relative_to(ROOT).with_suffix("").parts
+    parts = (IMPORT_NAME_OF_DIR.get(parts[0], parts[0]), *parts[1:])
     return ".".join(parts[:-1] if parts[-1] == "__init__" else parts)
 
 
@@ -405,6 +410,6 @@ def test_the_library_never_imports_the_app() -> None:
                 names = [alias.name for alias in node.names]
             elif isinstance(node, ast.ImportFrom) and node.level == 0:
                 names = [node.module or ""]
-            if any(name == "app" or name.startswith("app.") for name in names):
+            if any(name.split(".")[0] in ("app", "autotrack_studio") for name in names):
                 offenders.append(f"{path.relative_to(ROOT)}:{node.lineno}")
     assert not offenders

@@ -17,10 +17,6 @@ from mcap.records import Channel, Chunk, Message
 from mcap.stream_reader import StreamReader
 from mcap.writer import Writer
 
-from app.config import AppConfig
-from app.controller import TabController
-from app.memory import release_freed_memory
-from app.recordings import RecordingRegistry
 from autotrack.cli import main
 from autotrack.errors import InputError
 from autotrack.params import preset
@@ -33,6 +29,10 @@ from autotrack.sessions.maps import SessionMaps
 from autotrack.sessions.messages import target_messages
 from autotrack.sessions.schemas import MESSAGE_ENCODING, SCHEMA_ENCODING, schema_bytes
 from autotrack.synthetic.drift import DriftingTexture, DriftSettings
+from autotrack_studio.config import AppConfig
+from autotrack_studio.controller import TabController
+from autotrack_studio.memory import release_freed_memory
+from autotrack_studio.recordings import RecordingRegistry
 
 DEMO = Path(__file__).resolve().parents[1] / "static" / "demo"
 FRAMES = 30

@@ -158,8 +158,8 @@ def test_several_targets_on_several_cores_default_to_two_processes(
 
 
 def test_the_app_and_localize_take_the_default(monkeypatch, tmp_path):
-    from app.config import AppConfig
     from autotrack.cli.localize import _choose_concurrency
+    from autotrack_studio.config import AppConfig
 
     monkeypatch.setattr(multi, "available_cores", lambda: 2)
     assert AppConfig(sessions_dir=tmp_path).tracker_concurrency == (1, 2)

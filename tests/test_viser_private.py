@@ -12,7 +12,7 @@ import pytest
 import viser
 from websockets.http11 import Response
 
-from app.viser_private import (
+from autotrack_studio.viser_private import (
     CHECKED_VERSIONS,
     acknowledge_upload,
     check_viser_version,
