@@ -3,7 +3,7 @@
 Four AutoTrack targets on the rendered 1280x720 sequence of speed.py (frames decoded
 beforehand), one thread. The update's CPU time is measured without a profiler, then under a
 CPU-time cProfile, whose per-function times split it into the calls that release the GIL (the
-numba kernels, all declared nogil; the FFTW and pocketfft transforms; einsum) and the rest.
+numba kernels, all declared nogil; scipy.fft's pocketfft transforms; einsum) and the rest.
 The rest holds the GIL: two threads can overlap at most the first part. The profiler's own
 overhead lands in the rest, so the GIL-held share lies between (plain - released) / plain and
 (profiled - released) / profiled; both are printed. CPU time, so a busy machine moves it little.

@@ -63,7 +63,7 @@ def test_windowed_maps_in_the_transform_buffer_equal_the_old_product(dataset, na
     params = preset("autotrack", str(COLOUR_TABLE) if colour == "table" else None)
     table = load_colour_table(COLOUR_TABLE) if colour == "table" else None
     for tracker, image in tracked_frames(dataset, name, params):
-        patch = tracker._sampler(image).patch(tracker.angle)
+        patch = tracker._search_patch(image)
         expected = channel_last_stack(patch, params, table).transpose(2, 0, 1) * tracker.cos_window
         buffer = tracker.backend.transform.input_maps
         written = feature_maps(patch, params, table, tracker.cos_window, out=buffer)

@@ -1,4 +1,6 @@
-"""The AutoTrack tracker: features (grey, fHOG, colour), the DCF solved by ADMM (`dcf`), the
-automatic spatio-temporal regularisation with eq. 13 (`regularization`), the DSST scale filter
-(`scale`), patch sampling, the tracker that orchestrates them and several targets at once
-(`multi`); the opt-in autotrack+ mechanisms (`robust`, `redetect`)."""
+"""The AutoTrack tracker. The reference algorithm at this level, in numpy / scipy.fft / OpenCV:
+features (`features`, `fhog`, `colour_terms`), patches (`sampling`), the DCF solved by ADMM
+(`dcf`), the automatic spatio-temporal regularisation with eq. 13 (`regularization`), the DSST
+scale filter (`scale`) and the tracker that orchestrates them (`tracker`). `backend/`: where a
+frame's maths runs (the reference, or its numba twins); `plus/`: autotrack+; `parallel/`:
+several targets on threads or child processes."""

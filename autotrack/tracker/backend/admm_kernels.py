@@ -63,7 +63,7 @@ def g_step_kernel(
     sum_out,
 ):
     """The g-step (eqs. 10-11) per frequency, on (channels, frequencies) spectra, with the
-    neighbouring steps when asked: `dcf.solve_g_step`, which documents the arguments."""
+    neighbouring steps when asked: `fast_dcf.solve_g_step`, which documents the arguments."""
     # Spectra come in as (channels, frequencies) and per-frequency terms as (frequencies,):
     # flat views of the (rows, half columns) grid, so each loop over a channel is one run of
     # ~1,300 frequencies the compiler vectorises once, not 50 runs of 26 each re-checking their
