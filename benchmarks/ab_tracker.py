@@ -151,6 +151,15 @@ def compare(base, new, sequence_dir: Path, preset_name: str, frames: int, overri
     return spent[0] / updates * 1e3, spent[1] / updates * 1e3, identical, updates
 
 
+def _warmup_module(package: str):
+    """The revision's warm-up module: `tracker.parallel.warmup` since issue 37's layout,
+    `tracker.warmup` before it."""
+    try:
+        return importlib.import_module(f"{package}.tracker.parallel.warmup")
+    except ModuleNotFoundError:
+        return importlib.import_module(f"{package}.tracker.warmup")
+
+
 def main() -> int:
     parser = revision_parser(__doc__.splitlines()[0])
     parser.add_argument("--frames", type=int, default=150, help="updates per sequence")
@@ -171,7 +180,7 @@ def main() -> int:
             return 2
         base = importlib.import_module(BASE_PACKAGE)
         for module in (base, new):  # the revision's kernels compile in its fresh folder: untimed
-            warmup = importlib.import_module(f"{module.__name__}.tracker.warmup")
+            warmup = _warmup_module(module.__name__)
             warmup.warm_up(module.preset(args.preset, str(COLOUR_TABLE)))
         load = os.getloadavg()
         print(f"load average before: {load[0]:.1f} {load[1]:.1f} {load[2]:.1f}")

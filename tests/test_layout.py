@@ -11,8 +11,6 @@ import sys
 from collections.abc import Iterable, Iterator
 from pathlib import Path
 
-import pytest
-
 ROOT = Path(__file__).resolve().parents[1]
 SOURCE_DIRS = ("autotrack", "app", "benchmarks")
 MAX_FUNCTION_LINES = 80
@@ -21,20 +19,6 @@ DEPENDENCIES = ("scipy", "numba", "pyfftw", "viser")
 """Dependencies whose private modules and attributes the code must not use."""
 VISER_PRIVATE = "app/viser_private.py"
 """The one module allowed to use viser's privates (where viser has no public hook)."""
-BEING_REWORKED = (
-    "autotrack/tracker/",
-    "autotrack/localization/pnp.py",
-    "autotrack/scipy_binaries.py",
-    "benchmarks/speed.py",
-    "benchmarks/ab_fft_plans.py",
-    "benchmarks/ab_runs.py",
-    "benchmarks/feature_kernels.py",
-    "app/uploads.py",
-    "app/plots.py",
-)
-"""Files whose private accesses are being taken out in parallel (issue 37: the tracker and
-its benchmarks; issue 42: viser's privates into app/viser_private.py); their part of the
-private-access rule is expected to fail until that work is merged."""
 _DEPENDENCY_PRIVATE_PATH = re.compile(
     rf"^(?:{'|'.join(DEPENDENCIES)})(?:\.\w+)*\._(?!_)\w*(?:\.\w+)*$"
 )
@@ -282,10 +266,6 @@ def _private_uses(paths: dict[str, Path]) -> list[str]:
     return found
 
 
-def _being_reworked(entry: str) -> bool:
-    return entry.startswith(BEING_REWORKED)
-
-
 # --- the rules ----------------------------------------------------------------------------------
 
 
@@ -319,15 +299,7 @@ def test_the_import_graph_sees_imports_inside_functions(tmp_path: Path) -> None:
 
 
 def test_no_module_uses_private_names_of_another_or_of_scipy_numba_pyfftw_viser() -> None:
-    found = [entry for entry in _private_uses(_project_modules()) if not _being_reworked(entry)]
-    assert not found, f"private names used across modules: {found}"
-
-
-@pytest.mark.xfail(
-    strict=False, reason="issue 37 (tracker) and 42 (viser privates) take these out in parallel"
-)
-def test_the_files_being_reworked_use_no_private_names_either() -> None:
-    found = [entry for entry in _private_uses(_project_modules()) if _being_reworked(entry)]
+    found = _private_uses(_project_modules())
     assert not found, f"private names used across modules: {found}"
 
 

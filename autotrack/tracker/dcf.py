@@ -18,6 +18,8 @@ from functools import lru_cache
 import numpy as np
 import scipy.fft
 
+from autotrack.params import TrackerParams
+
 GRID_AXES = (-2, -1)
 
 
@@ -90,6 +92,17 @@ class AdmmSettings:
     """gamma's growth per iteration (x10)."""
     gamma_max: float
     """gamma's ceiling (10000)."""
+
+
+def admm_settings(params: TrackerParams) -> AdmmSettings:
+    """The ADMM solver's settings from the tracker parameters."""
+    return AdmmSettings(
+        iterations=params.admm_iterations,
+        lambda_spatial=params.admm_lambda,
+        gamma_init=params.gamma_init,
+        gamma_step=params.gamma_step,
+        gamma_max=params.gamma_max,
+    )
 
 
 def g_step(xf, yf, h_f, l_f, g_prev, gamma: float, theta: float, num_cells: int) -> np.ndarray:

@@ -34,13 +34,23 @@ class AutoTrack:
 
     _region_key: tuple[float, float, float] | None = None  # _search_region's (scale, window)
 
+    beyond_release: type[AutoTrack] | None = None
+    """The subclass `AutoTrack(params)` makes when `params.beyond_release` (autotrack+:
+    `tracker.plus.tracker.AutoTrackPlus`, which names itself here when its module is loaded,
+    as the `autotrack.tracker` package does): this class stays the paper's."""
+
+    def __init_subclass__(cls, *, beyond_release: bool = False, **options) -> None:
+        super().__init_subclass__(**options)
+        if beyond_release:
+            AutoTrack.beyond_release = cls
+
     def __new__(cls, params: TrackerParams | None = None, colour_table: np.ndarray | None = None):
         """`AutoTrack(params)` with any change beyond the release switched on is an
-        `AutoTrackPlus` (autotrack+, `tracker.plus.tracker`): this class stays the paper's."""
+        `AutoTrack.beyond_release` instance (autotrack+)."""
         if cls is AutoTrack and params is not None and params.beyond_release:
-            from autotrack.tracker.plus.tracker import AutoTrackPlus
-
-            cls = AutoTrackPlus
+            if AutoTrack.beyond_release is None:
+                raise RuntimeError("autotrack.tracker.plus.tracker was not loaded")
+            cls = AutoTrack.beyond_release
         return super().__new__(cls)
 
     def __init__(self, params: TrackerParams | None = None, colour_table: np.ndarray | None = None):

@@ -18,7 +18,7 @@ import numpy as np
 
 from autotrack.params import TrackerParams
 from autotrack.tracker import dcf, features, sampling
-from autotrack.tracker.dcf import AdmmSettings
+from autotrack.tracker.dcf import admm_settings
 
 
 class Backend(Protocol):
@@ -78,17 +78,6 @@ class ReferenceBackend:
 
     def response(self, g_f: np.ndarray, zf: np.ndarray) -> np.ndarray:
         return dcf.detection_response(g_f, zf, self.grid_size)
-
-
-def admm_settings(params: TrackerParams) -> AdmmSettings:
-    """The ADMM solver's settings from the tracker parameters."""
-    return AdmmSettings(
-        iterations=params.admm_iterations,
-        lambda_spatial=params.admm_lambda,
-        gamma_init=params.gamma_init,
-        gamma_step=params.gamma_step,
-        gamma_max=params.gamma_max,
-    )
 
 
 def make_backend(

@@ -5,7 +5,8 @@ from __future__ import annotations
 import numpy as np
 
 from autotrack.params import TrackerParams
-from autotrack.tracker.backend import admm_settings, fast_dcf, fast_features, fast_sampling
+from autotrack.tracker.backend import fast_dcf, fast_features, fast_sampling
+from autotrack.tracker.dcf import admm_settings
 
 
 class FastBackend:

@@ -287,7 +287,7 @@ class _AttachedFrames:
             memory = SharedMemory(name=name)
             # The parent owns (and removes) the segment: without this the child's own resource
             # tracker would remove it when the child exits, and warn about a leak.
-            resource_tracker.unregister(memory._name, "shared_memory")
+            resource_tracker.unregister("/" + memory.name, "shared_memory")  # POSIX name
         self._memory[name] = memory
         frame = np.ndarray(shape, np.uint8, buffer=memory.buf)
         frame.flags.writeable = False

@@ -20,7 +20,7 @@ from autotrack.tracker.plus.aspect import AspectFilter
 from autotrack.tracker.tracker import AutoTrack
 
 
-class AutoTrackPlus(AutoTrack):
+class AutoTrackPlus(AutoTrack, beyond_release=True):
     """AutoTrack with the autotrack+ switches of its parameters (`TrackerParams.beyond_release`)."""
 
     angle = 0.0  # the target's turn (rotation.py), degrees
