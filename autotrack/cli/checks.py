@@ -26,8 +26,16 @@ def _nearest_existing(path: Path) -> Path:
     return current
 
 
-def add_no_frames_argument(parser: argparse.ArgumentParser) -> None:
-    """--no-frames: a --session recording without the frames (boxes, maps and poses only)."""
+def add_session_arguments(parser: argparse.ArgumentParser) -> None:
+    """--session FILE (the run recorded to MCAP, its frames embedded) and --no-frames."""
+    parser.add_argument(
+        "--session",
+        type=Path,
+        default=None,
+        metavar="FILE",
+        help="record the run to this new MCAP session file (never overwritten; see "
+        "`autotrack session`), the tracked frames embedded",
+    )
     parser.add_argument(
         "--no-frames",
         action="store_true",

@@ -12,7 +12,7 @@ import numpy as np
 from tqdm import tqdm
 
 from autotrack.cli.checks import (
-    add_no_frames_argument,
+    add_session_arguments,
     check_output_file,
     check_session_file,
     finite,
@@ -85,15 +85,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
         metavar="PX",
         help="largest RMS reprojection error of a trusted pose (pixels, default 3)",
     )
-    parser.add_argument(
-        "--session",
-        type=Path,
-        default=None,
-        metavar="FILE",
-        help="record the run to this new MCAP session file (never overwritten; see "
-        "`autotrack session`), the tracked frames embedded",
-    )
-    add_no_frames_argument(parser)
+    add_session_arguments(parser)
     parser.add_argument(
         "--force", action="store_true", help="replace existing --out and --tracks files"
     )

@@ -10,7 +10,7 @@ import numpy as np
 from tqdm import tqdm
 
 from autotrack.cli.checks import (
-    add_no_frames_argument,
+    add_session_arguments,
     check_output_file,
     check_session_file,
     init_box,
@@ -59,15 +59,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     )
     parser.add_argument("--out", type=Path, default=None, help="write boxes here (x,y,w,h rows)")
     parser.add_argument("--force", action="store_true", help="replace an existing --out file")
-    parser.add_argument(
-        "--session",
-        type=Path,
-        default=None,
-        metavar="FILE",
-        help="record the run to this new MCAP session file (never overwritten; see "
-        "`autotrack session`), the tracked frames embedded",
-    )
-    add_no_frames_argument(parser)
+    add_session_arguments(parser)
     parser.add_argument("--quiet", action="store_true", help="no progress bar")
     add_live_arguments(parser)
     parser.add_argument(
