@@ -88,5 +88,8 @@ class AppConfig:
         (`uploads`: the upload folders of the tab's browser; default: the whole folder)."""
         self.upload_dir.mkdir(parents=True, exist_ok=True)
         upload_roots = (self.upload_dir,) if uploads is None else uploads
-        extra = [root for root in (self.demo_dir, *upload_roots) if root.is_dir()]
-        return normalise_roots([*self.allowed_roots, *extra])
+        allowed = normalise_roots(self.allowed_roots)
+        # The demo and the uploads need not exist: a closing tab of the same browser removes
+        # its empty upload folder (BrowserSpace.release) while a reloaded page's tab opens.
+        extra = [Path(root).resolve() for root in (self.demo_dir, *upload_roots) if root.is_dir()]
+        return allowed + tuple(dict.fromkeys(root for root in extra if root not in allowed))

@@ -472,3 +472,27 @@ def test_a_jpeg_given_as_the_scene_file_gets_a_clear_message(studio) -> None:
     message, error = channel.notes[-1]
     assert error and message == "scene file demo/img/00001.jpg is not a JSON text file"
     assert tab.controller.run is not None and tab.controller.run.scene is not None  # kept
+
+
+def test_a_tab_opens_while_another_tab_of_its_browser_removes_its_empty_upload_folder(
+    studio,
+) -> None:
+    """A reloaded page: the closing tab's browser space removes its empty upload folder
+    (BrowserSpace.release) while the new tab of the same browser lists its roots; a folder gone
+    by then left the new tab unopened ("allowed root ... is not an existing folder")."""
+
+    class FolderRemovedOnceSeen(type(Path())):
+        def is_dir(self) -> bool:
+            present = super().is_dir()
+            self.rmdir()  # the other tab's release, right after this tab saw the folder
+            return present
+
+    folder = studio.config.upload_dir / "browser-closing"
+    folder.mkdir(parents=True)
+    roots = studio.config.browsable_roots((FolderRemovedOnceSeen(folder),))
+    assert roots[: len(studio.config.allowed_roots)] == tuple(
+        root.resolve() for root in studio.config.allowed_roots
+    )
+    assert not folder.exists()  # gone, and the tab's roots were made all the same
+    with pytest.raises(InputError, match="is not an existing folder"):
+        AppConfig(allowed_roots=(studio.config.upload_dir / "no-such-root",)).browsable_roots()
