@@ -190,8 +190,10 @@ def run(args: argparse.Namespace) -> int:
     from autotrack_studio.config import (
         AppConfig,  # the app's modules (and viser) load only when it starts
     )
+    from autotrack_studio.memory import limit_malloc_arenas
     from autotrack_studio.server import StudioServer
 
+    limit_malloc_arenas()  # before the server starts any thread (app/memory.py)
     config = AppConfig(
         sequence=None if args.sequence is None else args.sequence.resolve(),
         scene=None if args.scene is None else args.scene.resolve(),

@@ -6,8 +6,8 @@ tab: a websocket opens it as a browser would (tests/browser_socket.py), the demo
 are drawn on frame 1, the tab tracks `frames / tabs` frames and its websocket closes. After each
 close it waits for the Tab to be freed and prints the server's RSS, the live Tab objects and
 the count of Python objects; at the end the RSS growth since the first tab closed. glibc's
-per-thread malloc arenas keep freed pages scattered: run with `MALLOC_ARENA_MAX=2` to see the
-allocator's share.
+per-thread malloc arenas keep freed pages scattered: the server caps them as `autotrack app`
+does (`limit_malloc_arenas`); `--default-arenas` leaves glibc's default to see their share.
 
     python benchmarks/tab_churn.py [--tabs 8] [--frames 3000]
 """
@@ -27,7 +27,7 @@ REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))  # tests/ holds the websocket browser and the drag helper
 
 from autotrack_studio.config import AppConfig  # noqa: E402
-from autotrack_studio.memory import release_freed_memory  # noqa: E402
+from autotrack_studio.memory import limit_malloc_arenas, release_freed_memory  # noqa: E402
 from autotrack_studio.server import StudioServer  # noqa: E402
 from tests.browser_socket import SocketBrowser  # noqa: E402
 from tests.test_app import DEMO, _draw_demo_boxes  # noqa: E402
@@ -89,7 +89,11 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--tabs", type=int, default=8)
     parser.add_argument("--frames", type=int, default=3000, help="frames over all tabs")
+    parser.add_argument(
+        "--default-arenas", action="store_true", help="glibc's arenas, not the server's cap"
+    )
     args = parser.parse_args()
+    capped = not args.default_arenas and limit_malloc_arenas()
     per_tab = args.frames // args.tabs
     with tempfile.TemporaryDirectory() as scratch:
         sequence = ping_pong_demo(Path(scratch) / "pingpong", per_tab)
@@ -103,7 +107,11 @@ def main() -> None:
             )
         )
         server.warm_up.join()
-        print(f"{args.tabs} tabs x {per_tab} frames, four targets; start RSS {rss_mb():.1f} MB")
+        arenas = "malloc arenas capped" if capped else "glibc's default arenas"
+        print(
+            f"{args.tabs} tabs x {per_tab} frames, four targets, {arenas}; "
+            f"start RSS {rss_mb():.1f} MB"
+        )
         references: list[weakref.ref] = []
         first = None
         try:

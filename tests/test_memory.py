@@ -7,6 +7,7 @@ from __future__ import annotations
 import gc
 import json
 import os
+import subprocess
 import sys
 from pathlib import Path
 
@@ -367,3 +368,49 @@ def test_localize_and_track_keep_no_maps(tmp_path, monkeypatch) -> None:
 
 def _demo_box() -> tuple[float, ...]:
     return tuple(json.loads((DEMO / "boxes.json").read_text())["A"])
+
+
+ARENA_PROBE = """
+import ctypes, ctypes.util, sys, threading
+import numpy as np
+from autotrack_studio.memory import limit_malloc_arenas
+
+if sys.argv[1] == "capped":
+    assert limit_malloc_arenas(2)
+start = threading.Barrier(8)
+
+def allocate():
+    start.wait()
+    blocks = [np.ones(1000) for _ in range(200)]  # 8 kB each: glibc's heap, not mmap
+    del blocks
+
+threads = [threading.Thread(target=allocate) for _ in range(8)]
+for thread in threads:
+    thread.start()
+for thread in threads:
+    thread.join()
+libc = ctypes.CDLL(ctypes.util.find_library("c"))
+libc.open_memstream.restype = ctypes.c_void_p
+libc.malloc_info.argtypes = [ctypes.c_int, ctypes.c_void_p]
+libc.fclose.argtypes = [ctypes.c_void_p]
+text, size = ctypes.c_char_p(), ctypes.c_size_t()
+stream = libc.open_memstream(ctypes.byref(text), ctypes.byref(size))
+libc.malloc_info(0, stream)
+libc.fclose(stream)
+print(text.value.decode().count("<heap nr="))
+"""
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="glibc's malloc arenas")
+def test_the_servers_arena_cap_keeps_its_threads_on_two_heaps() -> None:
+    """Eight threads allocating at once each get a heap of their own under glibc's default;
+    after `limit_malloc_arenas(2)` (what `autotrack app` calls before its server starts) they
+    share two, so freed pages are not scattered over a heap per thread (issue 42's churn)."""
+    env = {key: value for key, value in os.environ.items() if key != "MALLOC_ARENA_MAX"}
+
+    def heaps(mode: str) -> int:
+        probe = [sys.executable, "-c", ARENA_PROBE, mode]
+        return int(subprocess.run(probe, env=env, capture_output=True, check=True).stdout)
+
+    assert heaps("capped") <= 2
+    assert heaps("default") > 2
