@@ -1,0 +1,106 @@
+"""A fresh install's first run, and where its seconds go: the first 10 frames of DTB70/Gull1
+tracked by a new `python` process with empty caches (numba's kernels compile), then by a second
+process on the first one's caches (issue 39 item 5).
+
+The first process records numba's compile events (numba's documented event API,
+`numba.core.event`) and prints the seconds each kernel's compilation took, its callees'
+compilation excluded, beside the wall clock from launch to the tenth frame.
+
+python benchmarks/cold_start.py [--frames 10] [--top 12]
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+GULL1 = Path(__file__).resolve().parents[2] / "shared" / "data" / "sequences" / "DTB70" / "Gull1"
+
+_RUN_SCRIPT = """
+import json, sys, time
+from collections import defaultdict
+from numba.core import event
+
+compiles = event.RecordingListener()
+event.register("numba:compile", compiles)
+imported = time.time()
+from autotrack import AutoTrack, preset
+from autotrack.evaluation.datasets import load_otb_sequence
+from autotrack.io.frames import read_image
+
+sequence = load_otb_sequence(sys.argv[1])[0]
+imported = time.time()
+tracker = AutoTrack(preset("autotrack"))
+tracker.init(read_image(sequence.frame_paths[0]), sequence.init_box)
+for path in sequence.frame_paths[1 : int(sys.argv[2])]:
+    tracker.update(read_image(path))
+done = time.time()
+own = defaultdict(float)
+stack = []
+for stamp, record in compiles.buffer:
+    name = record.data["dispatcher"].py_func.__qualname__
+    if record.is_start:
+        stack.append([name, stamp, 0.0])
+        continue
+    name, start, nested = stack.pop()
+    own[name] += stamp - start - nested
+    if stack:
+        stack[-1][2] += stamp - start
+print(json.dumps({"imported": imported, "done": done, "compile": own}))
+"""
+
+
+def run(cache: Path, frames: int) -> dict:
+    """Launch a process that tracks `frames` frames of Gull1 with its caches in `cache`."""
+    env = dict(os.environ, NUMBA_CACHE_DIR=str(cache / "numba"), AUTOTRACK_CACHE_DIR=str(cache))
+    env["XDG_CACHE_HOME"] = str(cache / "xdg")
+    start = time.time()
+    done = subprocess.run(
+        [sys.executable, "-c", _RUN_SCRIPT, str(GULL1), str(frames)],
+        env=env,
+        capture_output=True,
+        text=True,
+        check=True,
+    )
+    figures = json.loads(done.stdout.splitlines()[-1])
+    figures["start"] = start
+    return figures
+
+
+def main() -> int:
+    """Print the first and second process's wall clock and the first one's compile table."""
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--frames", type=int, default=10)
+    parser.add_argument("--top", type=int, default=12, help="kernels listed")
+    args = parser.parse_args()
+    if not GULL1.is_dir():
+        print(f"Gull1 is not at {GULL1}", file=sys.stderr)
+        return 2
+    with tempfile.TemporaryDirectory() as scratch:
+        first = run(Path(scratch), args.frames)
+        second = run(Path(scratch), args.frames)
+    compile_seconds = sum(first["compile"].values())
+    print(f"{args.frames} frames of DTB70/Gull1, fresh processes (load {os.getloadavg()[0]:.1f}):")
+    for label, figures in (("empty caches", first), ("second process", second)):
+        wall = figures["done"] - figures["start"]
+        imports = figures["imported"] - figures["start"]
+        print(f"  {label:<14} {wall:6.2f} s wall  (launch + imports {imports:.2f} s)")
+    print(f"  compiling numba kernels: {compile_seconds:.2f} s of the first process")
+    ranked = sorted(first["compile"].items(), key=lambda item: -item[1])
+    for name, seconds in ranked[: args.top]:
+        print(f"    {seconds:6.2f} s  {name}")
+    rest = sum(seconds for _, seconds in ranked[args.top :])
+    print(
+        f"    {rest:6.2f} s  {len(ranked) - args.top} others (numba's own numpy overloads included)"
+    )
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
