@@ -87,6 +87,7 @@ class SessionRecorder:
         *,
         source: str,
         tracker_params: TrackerParams | Mapping[str, Any],
+        tracker: str | None = None,
         scene_path: str | Path | None = None,
         fps: float | None = None,
         embed_frames: bool = False,
@@ -101,6 +102,8 @@ class SessionRecorder:
 
         source: what was tracked (sequence folder, video file, camera name).
         tracker_params: the parameters of the tracker(s) of this session.
+        tracker: the tracker's name (`nanotrack`, `hybrid`, a preset; None: the preset
+            `tracker_params` describe, when they are TrackerParams).
         scene_path: localisation scene file; recorded by name and embedded as an attachment.
         fps: frame rate of the source; log times are frame_index / fps (DEFAULT_FPS if None).
         embed_frames: record the video frames (`log_frame`, `log_encoded_frame`) on the camera
@@ -128,6 +131,8 @@ class SessionRecorder:
         self.flush_interval = float(flush_interval)
         self._fsync = bool(fsync)
         params = params_dict(tracker_params)
+        if tracker is None and isinstance(tracker_params, TrackerParams):
+            tracker = tracker_params.name
         scene_bytes = None if scene_path is None else _read_scene(scene_path)
         # Everything is checked and built before the file exists: a refusal leaves no file.
         self.metadata = session_metadata(
@@ -135,6 +140,7 @@ class SessionRecorder:
             fps=self.fps,
             fps_given=fps is not None,
             params=params,
+            tracker=tracker,
             scene_path=scene_path,
             embed_frames=self.embed_frames,
             record_maps=self.record_maps,
