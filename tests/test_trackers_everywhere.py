@@ -18,7 +18,7 @@ from autotrack.errors import InputError
 from autotrack.hybrid.factory import TRUSTED, make_tracker, tracker_params
 from autotrack.io.frames import open_frames
 from autotrack.io.otb_boxes import read_boxes
-from autotrack.pipeline import Pipeline, Recording
+from autotrack.pipeline import Pipeline
 from autotrack.sessions import open_session
 
 REPO = Path(__file__).resolve().parents[1]
