@@ -217,3 +217,26 @@ def test_unloadable_models_end_the_commands_in_one_line(
     assert "NanoTrack model not found" in capsys.readouterr().err
     with pytest.raises(InputError, match="NanoTrack model not found"):
         make_tracker(tracker)
+
+
+def test_track_realtime_with_nanotrack_tracks_the_frames_it_takes(gull, tmp_path, capsys) -> None:
+    frames = open_frames(gull)
+    video = tmp_path / "gull.avi"
+    writer = cv2.VideoWriter(str(video), cv2.VideoWriter_fourcc(*"MJPG"), 5.0, frames.frame_size)
+    for index in range(len(frames)):
+        writer.write(frames.read_bgr(index))
+    writer.release()
+    frames.close()
+    x, y, w, h = read_boxes(gull / "groundtruth_rect.txt")[0]
+    out = tmp_path / "boxes.txt"
+    argv = ["track", str(video), "--realtime", "--preset", "nanotrack", "--fps", "5"]
+    assert main([*argv, "--init", f"{x + 1},{y + 1},{w},{h}", "--out", str(out), "--quiet"]) == 0
+    boxes = read_boxes(out)
+    taken = np.flatnonzero(np.isfinite(boxes).all(axis=1))
+    assert taken[0] == 0 and len(taken) >= 2
+    # NanoTrack by hand over the frames the live run took, in order: the same boxes.
+    with open_frames(video) as decoded:
+        tracker = make_tracker("nanotrack")
+        expected = [tracker.init(decoded.read(0), (x, y, w, h)).box]
+        expected += [tracker.update(decoded.read(int(k))).box for k in taken[1:]]
+    np.testing.assert_allclose(boxes[taken], expected, atol=1e-4)
