@@ -219,6 +219,21 @@ def test_unloadable_models_end_the_commands_in_one_line(
         make_tracker(tracker)
 
 
+def test_unloadable_models_end_autotrack_app_before_it_serves(
+    gull, missing_models, monkeypatch, capsys
+) -> None:
+    pytest.importorskip("viser")
+    import autotrack_studio.cli
+
+    def serve(*_args) -> int:
+        raise AssertionError("the server would start")
+
+    monkeypatch.setattr(autotrack_studio.cli, "free_port", serve)
+    assert main(["app", str(gull), "--preset", "hybrid"]) == 2
+    error = capsys.readouterr().err
+    assert error == f"autotrack: error: NanoTrack model not found: {missing_models}\n"
+
+
 def test_track_realtime_with_nanotrack_tracks_the_frames_it_takes(gull, tmp_path, capsys) -> None:
     frames = open_frames(gull)
     video = tmp_path / "gull.avi"
