@@ -143,7 +143,10 @@ def test_the_trusted_field_follows_the_schema(hybrid_results) -> None:
     signals["trusted"] = "neither"
     with pytest.raises(jsonschema.ValidationError):
         jsonschema.validate(signals, schema)
-    assert TRUSTED == ("both", "filter", "siamese")
+    from autotrack.hybrid.tracker import BOTH, FILTER, SIAMESE
+
+    assert TRUSTED == (BOTH, FILTER, SIAMESE)  # the codes the history and the schema use
+    assert schema["properties"]["trusted"]["enum"] == [*TRUSTED, None]
 
 
 @pytest.fixture(scope="module")
