@@ -127,6 +127,10 @@ def test_track_preset_hybrid_records_whom_it_trusted_per_frame(
     printed = capsys.readouterr().out
     assert "tracker   hybrid" in printed
     assert f"siamese {trusted.count('siamese')}" in printed
+    table = tmp_path / "tracks.csv"
+    assert main(["session", "export", str(session), "--csv", str(table)]) == 0
+    rows = [line.split(",") for line in table.read_text().splitlines()]
+    assert rows[0][-1] == "trusted" and [row[-1] for row in rows[1:]] == trusted
 
 
 def test_the_trusted_field_follows_the_schema(hybrid_results) -> None:
