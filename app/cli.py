@@ -16,9 +16,10 @@ import threading
 from dataclasses import replace
 from pathlib import Path
 
+from autotrack.cli.checks import add_tracker_argument
 from autotrack.errors import InputError
 from autotrack.extras import require_extra
-from autotrack.hybrid.factory import SIAMESE_TRACKERS, TRACKERS, make_tracker
+from autotrack.hybrid.factory import SIAMESE_TRACKERS, make_tracker
 from autotrack.userdirs import default_sessions_dir
 
 LOOPBACK_HOSTS = ("127.0.0.1", "localhost", "::1")
@@ -82,12 +83,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
         metavar="DIR",
         help="a folder whose sequences browser users may open (repeatable)",
     )
-    parser.add_argument(
-        "--preset",
-        default="autotrack",
-        choices=TRACKERS,
-        help="tracker of new runs: an AutoTrack preset, nanotrack or hybrid",
-    )
+    add_tracker_argument(parser)  # the tracker of new runs
     parser.add_argument(
         "--canvas-fps",
         type=float,

@@ -73,7 +73,7 @@ def session_metadata(
     source: str,
     fps: float,
     fps_given: bool,
-    params: dict[str, Any],
+    tracker_params: TrackerParams | Mapping[str, Any],
     scene_path: str | Path | None,
     tracker: str | None = None,
     embed_frames: bool,
@@ -82,7 +82,11 @@ def session_metadata(
     resumed_from: str | Path | None,
     live_source: bool = False,
 ) -> dict[str, str]:
-    """The session metadata record (every value a string, as MCAP metadata requires)."""
+    """The session metadata record (every value a string, as MCAP metadata requires);
+    `tracker` None: the preset `tracker_params` describe (none for a plain dict)."""
+    params = params_dict(tracker_params)
+    if tracker is None and isinstance(tracker_params, TrackerParams):
+        tracker = tracker_params.name
     return {
         **path_entries("source", source),
         **path_entries("scene_path", scene_path),
