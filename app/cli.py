@@ -16,9 +16,10 @@ import threading
 from dataclasses import replace
 from pathlib import Path
 
+from autotrack.cli.checks import add_tracker_argument
 from autotrack.errors import InputError
 from autotrack.extras import require_extra
-from autotrack.params import PRESETS
+from autotrack.hybrid.factory import SIAMESE_TRACKERS, make_tracker
 from autotrack.userdirs import default_sessions_dir
 
 LOOPBACK_HOSTS = ("127.0.0.1", "localhost", "::1")
@@ -82,9 +83,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
         metavar="DIR",
         help="a folder whose sequences browser users may open (repeatable)",
     )
-    parser.add_argument(
-        "--preset", default="autotrack", choices=sorted(PRESETS), help="tracker preset"
-    )
+    add_tracker_argument(parser)  # the tracker of new runs
     parser.add_argument(
         "--canvas-fps",
         type=float,
@@ -185,6 +184,8 @@ def run(args: argparse.Namespace) -> int:
         raise InputError(f"--max-targets must be at least 1, got {args.max_targets}")
     roots = startup_roots(args.sequence, args.scene, args.allow_roots)
     check_bindable(args.host)
+    if args.preset in SIAMESE_TRACKERS:
+        make_tracker(args.preset)  # NanoTrack's model files load, or the app says why, in one line
     port = free_port(args.host, args.port)
 
     from autotrack_studio.config import (

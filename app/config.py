@@ -42,7 +42,8 @@ class AppConfig:
     demo_dir: Path = DEMO_DIR
     """The embedded demo."""
     tracker_preset: str = "autotrack"
-    """Tracker preset of new runs (autotrack, strcf, strcf+asr, strcf+atr, autotrack+)."""
+    """Tracker of new runs: an AutoTrack preset (autotrack, strcf, strcf+asr, strcf+atr,
+    autotrack+), nanotrack or hybrid (`autotrack.hybrid.factory.TRACKERS`)."""
     tracker_threads: int | None = None
     """Threads each multi-target tracker may use (None: see `tracker_concurrency`)."""
     tracker_processes: int | None = None

@@ -17,11 +17,11 @@ from pathlib import Path
 import numpy as np
 
 from autotrack.errors import InputError
+from autotrack.hybrid.factory import tracker_params
 from autotrack.io.frames import FrameSource, open_frames
 from autotrack.localization.reacquire import ReacquireParams
 from autotrack.localization.refine import RefineParams
 from autotrack.localization.scene import Scene, load_scene
-from autotrack.params import preset
 from autotrack.pipeline import Pipeline, Recording, TrackedTarget
 from autotrack.sessions import Session
 from autotrack.tracker.parallel.target_process import WorkerPool
@@ -235,7 +235,8 @@ class TabController:
         options = {"scene": scene, "recording": recording, **self.tracker_options()}
         try:
             if session is None:
-                return Pipeline(frames, preset(self.preset_name), **options, **POSE_OPTIONS)
+                params, tracker = tracker_params(self.preset_name), self.preset_name
+                return Pipeline(frames, params, tracker=tracker, **options, **POSE_OPTIONS)
             return Pipeline.resume(session, frames, **options, **POSE_OPTIONS)
         except Exception:
             frames.close()
@@ -281,7 +282,7 @@ class TabController:
         self.suggested_session = None
         self.ground_truth = ground_truth_positions(scene_path)
         self.sequence_path, self.scene_path = path, scene_path
-        self.preset_name = preset_name or run.params.name
+        self.preset_name = preset_name or run.tracker_name
         boxes = (path if path.is_dir() else path.parent) / "boxes.json"
         self.boxes_path = boxes if boxes.is_file() and run.scene is not None else None
         self.cursor, self.selected, self.ties = 0, None, LandmarkTies()

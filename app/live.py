@@ -20,6 +20,7 @@ from pathlib import Path
 import numpy as np
 
 from autotrack.errors import AutoTrackError, InputError
+from autotrack.hybrid.factory import tracker_params
 from autotrack.io.live import CapturedFrame, LiveFrames, LiveLog, LiveReader, describe_source
 from autotrack.localization.scene import Scene, load_scene
 from autotrack.params import preset
@@ -155,7 +156,8 @@ class LiveControl:
         )
         run = Pipeline(
             frames,
-            preset(controller.preset_name),
+            tracker_params(controller.preset_name),
+            tracker=controller.preset_name,
             scene=self._scene,
             recording=recording,
             fps=self._reader().fps or DEFAULT_LIVE_FPS,

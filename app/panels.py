@@ -12,7 +12,7 @@ from dataclasses import dataclass
 import numpy as np
 import viser
 
-from autotrack.params import PRESETS
+from autotrack.hybrid.factory import TRACKERS
 from autotrack_studio.boxes import format_box
 from autotrack_studio.browser_text import markdown_literal
 from autotrack_studio.config import AppConfig
@@ -75,7 +75,7 @@ def _sequence_panel(gui: viser.GuiApi, config: AppConfig) -> SequencePanel:
             scene=gui.add_text("Scene file", initial_value=""),
             use_scene=gui.add_button("Use scene file (reopens)"),
             preset=gui.add_dropdown(
-                "Tracker", options=tuple(PRESETS), initial_value=config.tracker_preset
+                "Tracker", options=TRACKERS, initial_value=config.tracker_preset
             ),
             restart=gui.add_button("Restart with the chosen tracker", visible=False),
             upload=gui.add_upload_button(

@@ -1,10 +1,12 @@
 """The Targets table of a tab: the scene's landmarks, each target's tie, reprojection residual,
-box and last tracked frame, and the landmark search's warning (markdown for a viser widget)."""
+box and last tracked frame, which tracker the hybrid trusted on the current frame, and the
+landmark search's warning (markdown for a viser widget)."""
 
 from __future__ import annotations
 
 import math
 
+from autotrack.hybrid.factory import trusted_of
 from autotrack_studio.boxes import Box
 from autotrack_studio.controller import TabController
 
@@ -34,7 +36,8 @@ def _residuals_at_cursor(controller: TabController) -> dict[str, float]:
 def targets_table(controller: TabController) -> str:
     """The scene's landmarks (tied, or still to draw), the targets (`T1 → A`: tied to landmark
     A; `*`: by hand) with their reprojection residual (`_residuals_at_cursor`), the box on the
-    current frame and the last frame tracked, and the last landmark search's warning. Narrow
+    current frame and the last frame tracked, under it which tracker the hybrid trusted on the
+    current frame (`both`, `filter`, `siamese`), and the last landmark search's warning. Narrow
     enough that its header reads on one line at the default panel width (tests/test_app_browser_panels.py)."""
     run = controller.run
     targets = controller.targets()
@@ -53,8 +56,11 @@ def targets_table(controller: TabController) -> str:
     last = controller.ties.last
     residuals = _residuals_at_cursor(controller)
     rows = ["| target | residual | box x, y, w, h | tracked to |", "|---|---|---|---|"]
+    trusted: list[str] = []
     for target in targets:
         result = target.results.get(controller.cursor)
+        if trusted_of(result) is not None:
+            trusted.append(f"{target.id} {trusted_of(result)}")
         box = "—" if result is None else compact_box(result.box)
         residual = residuals.get(target.id)
         landmark = "" if target.landmark_id is None else f" → {target.landmark_id}"
@@ -65,6 +71,8 @@ def targets_table(controller: TabController) -> str:
             f"{target.last_frame + 1} |"
         )
     parts.append("\n".join(rows))
+    if trusted:
+        parts.append(f"Hybrid trusted on frame {controller.cursor + 1}: {', '.join(trusted)}")
     if controller.ties.manual & set(run.targets if run is not None else ()):
         parts.append("\\* tied to its landmark by hand")
     if last is not None and last.warning:

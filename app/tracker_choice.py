@@ -1,7 +1,11 @@
 """A tab's Tracker choice and when it takes effect: before the run's first target the run is
-made again with the chosen preset (so the session records the parameters the targets really
-track with); once targets track with another preset the page says so, and `restart` opens the
-sequence again with it on the current frame.
+made again with the chosen tracker (so the session records the tracker and parameters the
+targets really track with); once targets track with another tracker the page says so, and
+`restart` opens the sequence again with it on the current frame.
+
+The choices are the AutoTrack presets, `nanotrack` and `hybrid` (`autotrack.hybrid.factory`);
+choosing NanoTrack or the hybrid loads NanoTrack's model files once, so files that cannot be
+loaded are refused at the choice, in one line, and the tab keeps its tracker.
 
 `TrackerChoice` is a collaborator of `autotrack_studio.controller.TabController`, using its public
 interface only (`run`, `preset_name`, `message`, `cursor`, `file_run`, `sequence_path`,
@@ -13,7 +17,7 @@ from __future__ import annotations
 from typing import TYPE_CHECKING
 
 from autotrack.errors import InputError
-from autotrack.params import PRESETS
+from autotrack.hybrid.factory import SIAMESE_TRACKERS, TRACKERS, make_tracker
 
 if TYPE_CHECKING:
     from autotrack_studio.controller import TabController
@@ -26,14 +30,16 @@ class TrackerChoice:
         self.controller = controller
 
     def choose(self, name: str) -> None:
-        """Use tracker preset `name` from the next target on: a run without targets is made
-        again with it at once; a run whose targets track with another preset says so, and
+        """Use tracker `name` from the next target on: a run without targets is made again
+        with it at once; a run whose targets track with another tracker says so, and
         `restart` opens the sequence again with it."""
         controller = self.controller
-        if name not in PRESETS:
-            raise InputError(f"unknown tracker preset {name!r}; choose one of {sorted(PRESETS)}")
+        if name not in TRACKERS:
+            raise InputError(f"unknown tracker {name!r}; choose one of {', '.join(TRACKERS)}")
+        if name in SIAMESE_TRACKERS:
+            make_tracker(name)  # NanoTrack's model files load, or the choice is refused here
         controller.preset_name = name
-        if controller.run is None or controller.run.params.name == name:
+        if controller.run is None or controller.run.tracker_name == name:
             controller.message = f"Tracker: {name}."
         elif self.follow():
             controller.message = f"Tracker: {name}, for the targets drawn from now on."
@@ -42,16 +48,16 @@ class TrackerChoice:
 
     @property
     def pending(self) -> bool:
-        """Whether the chosen preset differs from the one the open run's targets track with."""
+        """Whether the chosen tracker differs from the one the open run's targets track with."""
         controller = self.controller
-        return controller.run is not None and controller.run.params.name != controller.preset_name
+        return controller.run is not None and controller.run.tracker_name != controller.preset_name
 
     def note(self) -> str:
-        """What the page says while the chosen preset waits for a restart ('' when none)."""
+        """What the page says while the chosen tracker waits for a restart ('' when none)."""
         controller = self.controller
         if not self.pending:
             return ""
-        used, chosen = controller.require_run().params.name, controller.preset_name
+        used, chosen = controller.require_run().tracker_name, controller.preset_name
         if not controller.file_run:
             return (
                 f"This run tracks with {used}: {chosen} applies to the next sequence opened "
@@ -64,12 +70,12 @@ class TrackerChoice:
         )
 
     def follow(self) -> bool:
-        """Before the run's first target: make the run again with the chosen preset if it has
-        another (the session then records the parameters the targets really use). True when
-        the run uses the chosen preset afterwards."""
+        """Before the run's first target: make the run again with the chosen tracker if it has
+        another (the session then records the tracker the targets really use). True when the
+        run uses the chosen tracker afterwards."""
         controller = self.controller
         run = controller.require_run()
-        if run.params.name == controller.preset_name:
+        if run.tracker_name == controller.preset_name:
             return True
         if run.targets or not controller.file_run or controller.sequence_path is None:
             return False
@@ -82,12 +88,12 @@ class TrackerChoice:
         return True
 
     def restart(self) -> None:
-        """Open the sequence again with the chosen preset, on the current frame (the targets
+        """Open the sequence again with the chosen tracker, on the current frame (the targets
         are dropped; the session recorded so far is finished and kept)."""
         controller = self.controller
         run = controller.require_run()
         if not self.pending:
-            raise InputError(f"this run already tracks with {run.params.name}")
+            raise InputError(f"this run already tracks with {run.tracker_name}")
         if not controller.file_run or controller.sequence_path is None:
             raise InputError(self.note())
         cursor = controller.cursor

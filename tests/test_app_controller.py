@@ -527,7 +527,7 @@ def test_uploads_and_typed_paths_stay_inside_the_allowed_folders(controller, tmp
     with pytest.raises(InputError, match="no such file or folder among those"):
         controller.open_typed(str(tmp_path))
     assert controller.sequence_path == opened
-    with pytest.raises(InputError, match="unknown tracker preset"):
+    with pytest.raises(InputError, match="unknown tracker 'kcf'; choose one of autotrack, "):
         controller.choose_preset("kcf")
     with pytest.raises(InputError, match="choose a sequence"):
         controller.open_listed("nothing")
@@ -853,6 +853,91 @@ def test_the_tracker_chosen_before_the_first_target_is_the_one_it_tracks_with(
         session_path = controller.run.session_path
         controller.close_run()
         assert open_session(session_path).tracker_params() == preset("autotrack+")
+    finally:
+        controller.close()
+
+
+def _truth_controller(tmp_path: Path, frames: int) -> TabController:
+    """A tab on the first `frames` frames of Gull1 (with its ground truth)."""
+    if not GULL1.is_dir():
+        pytest.skip(f"{GULL1} is missing (the shared benchmark data)")
+    sequence = _first_frames(GULL1, tmp_path / "Gull1", frames)
+    config = AppConfig(
+        sequence=sequence, sessions_dir=tmp_path / "sessions", demo_dir=DEMO, tracker_threads=1
+    )
+    config.sessions_dir.mkdir()
+    controller = TabController(config, (sequence,), RecordingRegistry(), 1)
+    controller.open_initial()
+    return controller
+
+
+def test_nanotrack_and_hybrid_chosen_in_the_app_track_show_their_maps_and_are_recorded(
+    tmp_path: Path,
+) -> None:
+    from autotrack.hybrid.factory import make_tracker
+    from autotrack.sessions import open_session
+
+    controller = _truth_controller(tmp_path, 6)
+    try:
+        controller.choose_preset("nanotrack")  # no target yet: the run follows at once
+        assert controller.run.tracker_name == "nanotrack" and not controller.preset_pending
+        controller.start_from_truth()
+        controller.seek(5)
+        target_id = next(iter(controller.run.targets))
+        view = controller.snapshot()
+        # NanoTrack's score map is the map panel's response map, its peak the plotted score.
+        frames = [controller.run.frame(k) for k in range(6)]
+        nano = make_tracker("nanotrack")
+        truth_box = controller.run.targets[target_id].results[0].box
+        expected = [nano.init(frames[0], truth_box)] + [nano.update(f) for f in frames[1:]]
+        drawn = view.drawings[target_id].result
+        np.testing.assert_array_equal(drawn.response_map, expected[-1].response_map)
+        np.testing.assert_array_equal(drawn.local_variation, expected[-1].local_variation)
+        plotted = view.history.signals[target_id]
+        np.testing.assert_array_equal(plotted["peak_score"], [r.peak_score for r in expected])
+        np.testing.assert_array_equal(
+            plotted["global_variation"], [r.global_variation for r in expected]
+        )
+        assert np.isnan(plotted["trusted"]).all()
+        nano_session = controller.run.session_path
+
+        controller.seek(0)
+        controller.choose_preset("hybrid")  # T1 tracks with nanotrack: a restart is offered
+        assert controller.preset_pending and "Restart with hybrid" in controller.message
+        controller.restart_with_preset()
+        assert controller.run.tracker_name == "hybrid" and not controller.run.targets
+        controller.start_from_truth()
+        controller.seek(5)
+        assert "Hybrid trusted on frame 6: T1 both" in targets_table(controller)
+        hybrid_session = controller.run.session_path
+        controller.close_run()
+        assert open_session(nano_session).tracker_name == "nanotrack"
+        recorded = open_session(hybrid_session)
+        assert recorded.tracker_name == "hybrid"
+        assert recorded.trusted["T1"].tolist() == ["both"] * 6
+
+        controller.sessions.refresh()  # reopened: the hybrid again, whom it trusted kept
+        controller.sessions.reopen(hybrid_session.name)
+        assert controller.run.tracker_name == "hybrid" and controller.preset_name == "hybrid"
+        assert controller.run.targets["T1"].results[2].trusted == "both"
+    finally:
+        controller.close()
+
+
+def test_a_tracker_whose_models_cannot_load_is_refused_in_one_line(
+    tmp_path: Path, monkeypatch
+) -> None:
+    from autotrack.nanotrack.tracker import NanoTrackParams
+
+    missing = tmp_path / "gone" / "nanotrack_backbone_sim.onnx"
+    defaults = NanoTrackParams.__init__.__defaults__
+    monkeypatch.setattr(NanoTrackParams.__init__, "__defaults__", (missing, *defaults[1:]))
+    controller = _truth_controller(tmp_path, 3)
+    try:
+        for name in ("nanotrack", "hybrid"):
+            with pytest.raises(InputError, match=f"NanoTrack model not found: {missing}$"):
+                controller.choose_preset(name)
+            assert controller.preset_name == controller.run.tracker_name == "autotrack"
     finally:
         controller.close()
 

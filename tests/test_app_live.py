@@ -309,3 +309,23 @@ def test_live_boxes_json_refuses_to_stack_on_drawn_targets(tmp_path: Path, media
     assert live.state == FROZEN
     live.halt()
     controller.close()
+
+
+def test_a_live_run_tracks_with_the_tracker_chosen_before_it_froze(
+    tmp_path: Path, media: Path
+) -> None:
+    from autotrack.hybrid.factory import make_tracker
+
+    controller, live = _live_tab(tmp_path)
+    controller.choose_preset("nanotrack")
+    live.open_source("flight.avi", str(DEMO_DIR / "scene.json"))
+    live.freeze()
+    live.load_boxes_json()
+    run = controller.run
+    assert run.tracker_name == controller.preset_name == "nanotrack"
+    frozen = live.newest.index
+    started = run.results_at(frozen)["T1"]
+    by_hand = make_tracker("nanotrack").init(run.frame(frozen), started.box)
+    assert started.search_box == by_hand.search_box  # NanoTrack's own search region
+    live.stop()
+    controller.close()

@@ -753,7 +753,7 @@ def test_cli_export_round_trips_tracks_csv_and_tum(
         boxes = read_boxes(track_file)
         np.testing.assert_allclose(boxes, session.tracks[target_id], atol=1e-4)
     rows = (out / "all.csv").read_text().splitlines()
-    assert rows[0] == "frame,target,landmark,x,y,w,h,score,aberrant"
+    assert rows[0] == "frame,target,landmark,x,y,w,h,score,aberrant,trusted"
     kept = [series for target, series in recorded.results.items() if target != "t3"]
     assert len(rows) - 1 == sum(len(series) for series in kept)
     assert not any(row.split(",")[1] == "t3" for row in rows[1:])
@@ -762,6 +762,7 @@ def test_cli_export_round_trips_tracks_csv_and_tum(
     result = recorded.results["t2"][7]
     assert [float(v) for v in numbers[:4]] == list(result.box)
     assert float(numbers[4]) == result.peak_score and numbers[5] == str(int(result.aberrant))
+    assert numbers[6] == ""  # an AutoTrack target: the hybrid's column stays empty
     tum = np.loadtxt(out / "poses.tum", comments="#")
     valid = [p for p in recorded.poses if p.valid]
     assert tum.shape == (len(valid), 8)

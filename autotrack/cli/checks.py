@@ -15,6 +15,8 @@ from pathlib import Path
 import numpy as np
 
 from autotrack.errors import BoxError, InputError
+from autotrack.hybrid.factory import SIAMESE_TRACKERS, TRACKERS, make_tracker, tracker_params
+from autotrack.params import TrackerParams
 from autotrack.tracker.inputs import validate_box
 
 
@@ -42,6 +44,28 @@ def add_session_arguments(parser: argparse.ArgumentParser) -> None:
         help="with --session: do not embed the tracked frames (a much smaller file that "
         "replays without its footage)",
     )
+
+
+def add_tracker_argument(parser: argparse.ArgumentParser) -> None:
+    """--preset NAME: an AutoTrack preset, `nanotrack` or `hybrid` (`autotrack.hybrid.factory`)."""
+    parser.add_argument(
+        "--preset",
+        default="autotrack",
+        choices=TRACKERS,
+        help="the tracker: an AutoTrack preset, nanotrack (NanoTrack V2) or hybrid "
+        "(autotrack+ and NanoTrack fused); default autotrack",
+    )
+
+
+def chosen_tracker(
+    args: argparse.Namespace, colour_table: Path | None = None
+) -> tuple[str, TrackerParams]:
+    """--preset's tracker name and the parameters it runs with; NanoTrack's model files are
+    loaded once here, so a broken install ends the command before any work, in one line."""
+    params = tracker_params(args.preset, colour_table)
+    if args.preset in SIAMESE_TRACKERS:
+        make_tracker(args.preset, params)
+    return args.preset, params
 
 
 def check_session_file(path: Path | None) -> None:

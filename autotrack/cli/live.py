@@ -58,7 +58,7 @@ def _finish(summary: Any, frame_log: Path | None) -> None:
         print(f"frame log written to {frame_log}")
 
 
-def run_track_live(args: argparse.Namespace, params: Any) -> int:
+def run_track_live(args: argparse.Namespace, tracker: str, params: Any) -> int:
     """`autotrack track SOURCE --realtime`: boxes of the processed frames, NaN rows for the
     dropped ones, and the drop/latency report."""
     from autotrack.io.live import LiveReader, describe_source
@@ -73,11 +73,15 @@ def run_track_live(args: argparse.Namespace, params: Any) -> int:
     except BoxError:
         reader.close()
         raise
-    warm_up(params, reader.frame_size, [first_box])
+    warm_up(params, reader.frame_size, [first_box], tracker)
     progress = tqdm(unit="frame", desc=describe_source(args.sequence), disable=args.quiet)
     with reader, progress:
         boxes, summary = track_live(
-            reader, params, first_box, on_result=lambda frame, outcome: progress.update()
+            reader,
+            params,
+            first_box,
+            on_result=lambda frame, outcome: progress.update(),
+            tracker=tracker,
         )
     if args.out is not None:
         args.out.parent.mkdir(parents=True, exist_ok=True)
@@ -120,6 +124,7 @@ def run_localize_live(
     scene: Any,
     scene_path: Path,
     init: Any,
+    tracker: str,
     tracker_params: Any,
     localizer_params: Any,
     gt: Any,
@@ -134,7 +139,7 @@ def run_localize_live(
 
     boxes = boxes_by_landmark(init, scene)
     reader = LiveReader(args.sequence, fps=args.fps)
-    warm_up(tracker_params, reader.frame_size, list(boxes.values()))
+    warm_up(tracker_params, reader.frame_size, list(boxes.values()), tracker)
     progress = tqdm(unit="frame", desc=describe_source(args.sequence), disable=args.quiet)
     records = OutcomeLog(scene.landmark_ids)
     with reader, progress:
@@ -143,6 +148,7 @@ def run_localize_live(
             log,
             tracker_params,
             lambda pipeline, frame_index: pipeline.add_targets(frame_index, boxes),
+            tracker=tracker,
             scene=scene,
             localizer_params=localizer_params,
             recording=_live_recording(args, scene_path),

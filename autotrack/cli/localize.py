@@ -13,8 +13,10 @@ from tqdm import tqdm
 
 from autotrack.cli.checks import (
     add_session_arguments,
+    add_tracker_argument,
     check_output_file,
     check_session_file,
+    chosen_tracker,
     finite,
 )
 from autotrack.cli.live import add_live_arguments, check_source, run_localize_live
@@ -24,7 +26,6 @@ from autotrack.errors import InputError
 from autotrack.io.boxes_json import read_boxes_json
 from autotrack.io.live import source_argument
 from autotrack.localization.scene import load_scene, scene_warnings
-from autotrack.params import PRESETS, preset
 
 if TYPE_CHECKING:
     from autotrack.pipeline import Recording
@@ -76,7 +77,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
         default=None,
         help=f"frame rate for timestamps (default: the video's, else {DEFAULT_FPS:g})",
     )
-    parser.add_argument("--preset", default="autotrack", choices=sorted(PRESETS))
+    add_tracker_argument(parser)
     _add_concurrency_arguments(parser)
     parser.add_argument(
         "--max-rms",
@@ -219,13 +220,15 @@ def run_localize(args: argparse.Namespace) -> int:
         localizer_params = replace(localizer_params, max_rms_error_px=args.max_rms)
     gt = None if args.gt is None else read_tum(args.gt)
     check_source(args)
+    tracker, tracker_params = chosen_tracker(args)
     if args.realtime:
         return run_localize_live(
             args,
             scene=scene,
             scene_path=scene_path,
             init=init,
-            tracker_params=preset(args.preset),
+            tracker=tracker,
+            tracker_params=tracker_params,
             localizer_params=localizer_params,
             gt=gt,
         )
@@ -242,8 +245,9 @@ def run_localize(args: argparse.Namespace) -> int:
             frames,
             scene,
             init,
-            preset(args.preset),
+            tracker_params,
             localizer_params,
+            tracker=tracker,
             recording=recording,
             fps=fps,
             threads=args.threads,

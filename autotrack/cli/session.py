@@ -96,6 +96,7 @@ def session_summary(session: Session) -> dict[str, Any]:
             "last_frame": int(present[-1]) if present.size else None,
             "aberrant_frames": int(session.aberrant[target_id].sum()),
             "landmark_id": session.landmark_ids.get(target_id),
+            "trusted": dict(Counter(str(v) for v in session.trusted.get(target_id, ()) if v)),
         }
     poses = session.poses
     return {
@@ -104,6 +105,7 @@ def session_summary(session: Session) -> dict[str, Any]:
         "package_version": session.metadata.get("package_version"),
         "created_utc": session.metadata.get("created_utc"),
         "source": session.metadata.get("source"),  # as text (`path_text`)
+        "tracker": session.tracker_name,
         "scene_path": session.metadata.get("scene_path") or None,
         "fps": session.fps,
         "frames": session.frame_count,
@@ -137,6 +139,7 @@ def _format_summary(summary: dict[str, Any]) -> str:
         f"format    version {summary['format_version']}, written by autotrack-studio "
         f"{summary['package_version']} on {summary['created_utc']}",
         f"source    {summary['source']}",
+        f"tracker   {summary['tracker']}",
     ]
     if summary["scene_path"]:
         lines.append(f"scene     {summary['scene_path']}")
@@ -157,9 +160,11 @@ def _format_summary(summary: dict[str, Any]) -> str:
             else "no boxes"
         )
         landmark = f", landmark {target['landmark_id']}" if target["landmark_id"] else ""
+        trusted = ", ".join(f"{name} {count}" for name, count in target["trusted"].items())
         lines.append(
             f"  {target_id}: {target['frames']} boxes ({extent}), "
             f"{target['aberrant_frames']} aberrant{landmark}"
+            + (f"; trusted {trusted}" if trusted else "")
         )
     poses = summary["poses"]
     lines.append(f"poses     {poses['valid']} valid of {poses['frames']}")

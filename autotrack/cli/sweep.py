@@ -6,7 +6,7 @@ import argparse
 from pathlib import Path
 
 from autotrack.cli.bench import add_run_arguments
-from autotrack.params import PRESETS
+from autotrack.hybrid.factory import TRACKERS
 
 
 def add_parser(subparsers: argparse._SubParsersAction) -> None:
@@ -24,7 +24,11 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     )
     parser.add_argument("root", type=Path, help="benchmark folder (layout is auto-detected)")
     parser.add_argument(
-        "--preset", default="autotrack", choices=sorted(PRESETS), help="base parameters"
+        "--preset",
+        default="autotrack",
+        choices=TRACKERS,
+        help="base parameters: an AutoTrack preset, or hybrid (its autotrack+ filter's); "
+        "nanotrack has no TrackerParams and is refused",
     )
     parser.add_argument(
         "--grid",
@@ -63,12 +67,14 @@ def run(args: argparse.Namespace) -> int:
         write_outputs,
     )
     from autotrack.extras import has_module, install_hint
-    from autotrack.params import preset
+    from autotrack.hybrid.factory import SIAMESE_TRACKERS, tracker_params
 
     if args.colour_table is not None and not args.colour_table.is_file():
         raise InputError(f"colour table not found: {args.colour_table}")
     axes = parse_grid(args.grid)
-    combinations = grid_combinations(preset(args.preset, args.colour_table), axes)
+    tracker = args.preset if args.preset in SIAMESE_TRACKERS else None
+    base = tracker_params(args.preset, args.colour_table)
+    combinations = grid_combinations(base, axes, tracker)
     sequences = load_sequences(args.root)
     if args.frames is not None:
         sequences = limit_frames(sequences, args.frames)

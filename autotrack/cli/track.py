@@ -11,8 +11,10 @@ from tqdm import tqdm
 
 from autotrack.cli.checks import (
     add_session_arguments,
+    add_tracker_argument,
     check_output_file,
     check_session_file,
+    chosen_tracker,
     init_box,
 )
 from autotrack.cli.live import add_live_arguments, check_source, run_track_live
@@ -23,7 +25,6 @@ from autotrack.evaluation.metrics import score_sequence
 from autotrack.io.frames import open_frames
 from autotrack.io.live import source_argument
 from autotrack.io.otb_boxes import read_boxes, write_boxes
-from autotrack.params import PRESETS, preset
 
 
 def add_parser(subparsers: argparse._SubParsersAction) -> None:
@@ -48,7 +49,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
         default=None,
         help="initial box x,y,w,h (1-based, as groundtruth_rect.txt); default: its first row",
     )
-    parser.add_argument("--preset", default="autotrack", choices=sorted(PRESETS))
+    add_tracker_argument(parser)
     parser.add_argument(
         "--color-names",
         "--colour-table",
@@ -84,8 +85,9 @@ def run(args: argparse.Namespace) -> int:
     if args.colour_table is not None and not args.colour_table.is_file():
         raise InputError(f"Color Names table not found: {args.colour_table}")
     check_source(args)
+    tracker, params = chosen_tracker(args, args.colour_table)
     if args.realtime:
-        return run_track_live(args, preset(args.preset, args.colour_table))
+        return run_track_live(args, tracker, params)
     frames = open_frames(args.sequence)
     ground_truth = _ground_truth(args.sequence)
     if args.init is not None:
@@ -105,11 +107,10 @@ def run(args: argparse.Namespace) -> int:
         recording = Recording(
             source=str(args.sequence), path=args.session, embed_frames=not args.no_frames
         )
-    params = preset(args.preset, args.colour_table)
     with (
         frames,
         progress,
-        Pipeline(frames, params, recording=recording, map_window=0) as pipeline,
+        Pipeline(frames, params, tracker=tracker, recording=recording, map_window=0) as pipeline,
     ):
         target_id = pipeline.add_target(0, tuple(first_box), landmark_id=None)
         for outcome in pipeline.run():

@@ -36,6 +36,7 @@ from autotrack.evaluation.datasets import Sequence as BenchmarkSequence
 from autotrack.evaluation.peers import AutoTrackPeer
 from autotrack.evaluation.runs import TaskResult, run_resumable, track_timed
 from autotrack.extras import has_module
+from autotrack.hybrid.factory import NANOTRACK, BoxesOf, make_tracker
 from autotrack.io.atomic import write_figure, write_text
 from autotrack.io.csv_table import write_csv as write_table
 from autotrack.params import TrackerParams
@@ -66,6 +67,8 @@ class Combination:
     """(parameter, value) pairs in grid-axis order."""
     params: TrackerParams
     """The base preset with these values replaced."""
+    tracker: str | None = None
+    """`hybrid`: the parameters are the hybrid's correlation filter's; None: AutoTrack's."""
 
     @property
     def label(self) -> str:
@@ -140,25 +143,40 @@ def parse_grid(specs: Sequence[str]) -> tuple[GridAxis, ...]:
     return tuple(axes)
 
 
-def grid_combinations(base: TrackerParams, axes: Sequence[GridAxis]) -> tuple[Combination, ...]:
-    """Every combination of the axes' values (the first axis varies slowest), as parameters.
+def grid_combinations(
+    base: TrackerParams, axes: Sequence[GridAxis], tracker: str | None = None
+) -> tuple[Combination, ...]:
+    """Every combination of the axes' values (the first axis varies slowest), as parameters of
+    `tracker` (None: AutoTrack; `hybrid`: its correlation filter; NanoTrack has no
+    TrackerParams and is refused).
 
     InputError when a combination gives invalid parameters (TrackerParams checks them).
     """
+    if tracker == NANOTRACK:
+        fields = ", ".join(axis.name for axis in axes) or "none"
+        raise InputError(
+            f"nanotrack uses no TrackerParams, so a sweep of them ({fields}) changes nothing: "
+            "sweep an AutoTrack preset or hybrid, or compare trackers with autotrack bench"
+        )
     combinations = []
     for values in itertools.product(*(axis.values for axis in axes)):
         pairs = tuple(zip((axis.name for axis in axes), values, strict=True))
-        combination = Combination(pairs, dataclasses.replace(base, **dict(pairs)))
+        combination = Combination(pairs, dataclasses.replace(base, **dict(pairs)), tracker)
         if not all(_SAFE_VALUE.match(format_value(value)) for _, value in pairs):
             raise InputError(f"--grid values must be plain numbers or words: {combination.label}")
         combinations.append(combination)
     return tuple(combinations)
 
 
-def run_combination(label: str, params: TrackerParams, sequence: BenchmarkSequence) -> TaskResult:
-    """Track one sequence with one combination's parameters, timing only the tracker calls
-    (the benchmark's `run_task` for a parameter set instead of a tracker name)."""
-    return track_timed(label, lambda: AutoTrackPeer(params), sequence)
+def run_combination(
+    label: str, params: TrackerParams, sequence: BenchmarkSequence, tracker: str | None = None
+) -> TaskResult:
+    """Track one sequence with one combination's parameters (of `tracker`, None: AutoTrack),
+    timing only the tracker calls (the benchmark's `run_task` for a parameter set instead of a
+    tracker name)."""
+    if tracker is None:
+        return track_timed(label, lambda: AutoTrackPeer(params), sequence)
+    return track_timed(label, lambda: BoxesOf(make_tracker(tracker, params)), sequence)
 
 
 def colour_feature_label(params: TrackerParams) -> str:
@@ -168,15 +186,20 @@ def colour_feature_label(params: TrackerParams) -> str:
     return params.colour_feature
 
 
-def _params_json(params: TrackerParams) -> str:
-    return json.dumps(dataclasses.asdict(params), sort_keys=True, indent=1) + "\n"
+def _params_json(combination: Combination) -> str:
+    """The combination's params.json: its parameters, and its tracker when not AutoTrack (the
+    same parameters of another tracker are other results)."""
+    recorded = dataclasses.asdict(combination.params)
+    if combination.tracker is not None:
+        recorded["tracker"] = combination.tracker
+    return json.dumps(recorded, sort_keys=True, indent=1) + "\n"
 
 
 def _claim_folder(runs_dir: Path, combination: Combination) -> None:
     """Create the combination's folder with its params.json; refuse one holding other params."""
     folder = runs_dir / combination.label
     params_path = folder / "params.json"
-    expected = _params_json(combination.params)
+    expected = _params_json(combination)
     if params_path.is_file() and params_path.read_text(encoding="utf-8") != expected:
         raise InputError(
             f"{folder} holds results of other parameters (another --preset or --color-names): "
@@ -221,13 +244,16 @@ def run_sweep(
     for combination in combinations:
         _claim_folder(runs_dir, combination)
     colour_features = {c.label: colour_feature_label(c.params) for c in combinations}
-    params = {combination.label: combination.params for combination in combinations}
+    tasks = {c.label: (c.params, c.tracker) for c in combinations}
     runs = run_resumable(
         [combination.label for combination in combinations],
         sequences,
         runs_dir,
         colour_features,
-        lambda label, sequence: (run_combination, (label, params[label], sequence)),
+        lambda label, sequence: (
+            run_combination,
+            (label, tasks[label][0], sequence, tasks[label][1]),
+        ),
         jobs=jobs,
         executor=executor,
         progress=progress,

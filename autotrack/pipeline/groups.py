@@ -5,6 +5,9 @@ frame join one group, so the usual case (every box on the first frame, then play
 MultiTracker. A box redrawn on a target whose group is at that frame resets the target in
 place; redrawn at an earlier frame, the target leaves its group and restarts in the group at
 that frame (or a new one), and the other targets keep their filters.
+
+NanoTrack and the hybrid (`autotrack.hybrid.factory`) run in this process only: the child
+processes track with AutoTrack, so for them the processes asked for become threads.
 """
 
 from __future__ import annotations
@@ -15,6 +18,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from autotrack.hybrid.factory import SIAMESE_TRACKERS, make_tracker
 from autotrack.io.frames import FrameSource
 from autotrack.params import TrackerParams
 from autotrack.result import TrackResult
@@ -56,10 +60,17 @@ class TrackerGroups:
         threads: int,
         processes: int = 1,
         worker_pool: WorkerPool | None = None,
+        tracker_name: str | None = None,
     ) -> None:
         """`worker_pool` lends the MultiTrackers their child processes (None with `processes`
-        > 1: a pool of the groups' own, closed with them)."""
+        > 1: a pool of the groups' own, closed with them). `tracker_name` `nanotrack` or
+        `hybrid` tracks with them (`params`: the hybrid's filter's), in `max(threads,
+        processes)` threads; else AutoTrack of `params`."""
         self.params = params
+        self.new_tracker = None
+        if tracker_name in SIAMESE_TRACKERS:
+            self.new_tracker = lambda: make_tracker(tracker_name, params)
+            threads, processes = max(threads, processes), 1
         self.threads = threads
         self.processes = processes
         self._own_pool = worker_pool is None and processes > 1
@@ -99,6 +110,7 @@ class TrackerGroups:
                 threads=self.threads,
                 processes=self.processes,
                 worker_pool=self._worker_pool,
+                new_tracker=self.new_tracker,
             )
             try:
                 results.update(tracker.init(frame, fresh))

@@ -16,6 +16,7 @@ from collections.abc import Iterator, Mapping
 
 import numpy as np
 
+from autotrack.hybrid.factory import TRUSTED, trusted_code, with_trusted
 from autotrack.result import TrackResult
 
 INITIAL_CAPACITY = 64
@@ -27,7 +28,10 @@ SCALAR_COLUMNS = ("peak_score", "global_variation", "theta_ref", "theta", "scale
 """The float fields of a TrackResult kept as columns (after the two boxes), in column order."""
 _SCALAR = {name: 8 + offset for offset, name in enumerate(SCALAR_COLUMNS)}
 _ABERRANT = 8 + len(SCALAR_COLUMNS)
-_WIDTH = _ABERRANT + 1
+_TRUSTED = _ABERRANT + 1
+"""A hybrid result's `trusted` as its code (`autotrack.hybrid.factory.trusted_code`; NaN for
+other trackers): a rebuilt result says whom the hybrid trusted."""
+_WIDTH = _TRUSTED + 1
 _NAN = math.nan
 """One NaN object for every rebuilt NaN field: rebuilt results compare equal (`==` on tuples
 of fields tries identity first, and NaN != NaN)."""
@@ -59,6 +63,7 @@ class ResultHistory(Mapping[int, TrackResult]):
         for name, column in _SCALAR.items():
             values[column] = getattr(result, name)
         values[_ABERRANT] = 1.0 if result.aberrant else 0.0
+        values[_TRUSTED] = trusted_code(result)
         self._recent[frame_index] = result
         # Restarted before the window: the frames from here on are tracked afresh.
         first = min(self.maps_from, frame_index)
@@ -114,7 +119,7 @@ class ResultHistory(Mapping[int, TrackResult]):
         if row is None:
             raise KeyError(frame_index)
         values = self._values[row].tolist()
-        return TrackResult(
+        result = TrackResult(
             frame_index=int(frame_index),
             box=tuple(values[_BOX]),
             peak_score=_number(values[_SCALAR["peak_score"]]),
@@ -127,6 +132,8 @@ class ResultHistory(Mapping[int, TrackResult]):
             scale_factor=_number(values[_SCALAR["scale_factor"]]),
             search_box=tuple(values[_SEARCH_BOX]),
         )
+        code = values[_TRUSTED]
+        return result if code != code else with_trusted(result, TRUSTED[int(code)])
 
     def __contains__(self, frame_index: object) -> bool:
         return isinstance(frame_index, int | np.integer) and self._row(int(frame_index)) is not None
@@ -169,6 +176,12 @@ class ResultHistory(Mapping[int, TrackResult]):
     def aberrant(self) -> np.ndarray:
         """Whether each of those frames was aberrant (a new array)."""
         return self._values[: self._count, _ABERRANT] != 0.0
+
+    @property
+    def trusted(self) -> np.ndarray:
+        """Whom the hybrid trusted on each of those frames, as `trusted_code`s (NaN: another
+        tracker; a read-only view)."""
+        return _read_only(self._values[: self._count, _TRUSTED])
 
     def column(self, name: str) -> np.ndarray:
         """A scalar field (one of SCALAR_COLUMNS) over those frames (a read-only view)."""

@@ -37,6 +37,7 @@ def run_live(
     params: TrackerParams,
     start: Callable[[Pipeline, int], object],
     *,
+    tracker: str | None = None,
     scene: Scene | None = None,
     localizer_params: LocalizerParams | None = None,
     recording: Recording | None = None,
@@ -46,7 +47,8 @@ def run_live(
 ) -> Iterator[tuple[CapturedFrame, FrameOutcome]]:
     """Each processed frame and its outcome, until the source ends.
 
-    `start(pipeline, frame_index)` adds the targets on the first frame. `fps` is the frame
+    `start(pipeline, frame_index)` adds the targets on the first frame; `tracker` is the
+    Pipeline's (None: AutoTrack with `params`). `fps` is the frame
     rate of the recording's log times (default: the reader's). The reader must be started.
     `pose_options` go to the Pipeline (refine_params, reacquire_params, map_window).
     """
@@ -59,6 +61,7 @@ def run_live(
     pipeline = Pipeline(
         frames,
         params,
+        tracker=tracker,
         scene=scene,
         localizer_params=localizer_params,
         recording=recording,
@@ -97,8 +100,10 @@ def track_live(
     params: TrackerParams,
     init_box: Sequence[float],
     on_result: Callable[[CapturedFrame, FrameOutcome], None] | None = None,
+    tracker: str | None = None,
 ) -> tuple[np.ndarray, LiveSummary]:
-    """Track one target on the newest frame each time the pipeline is free.
+    """Track one target on the newest frame each time the pipeline is free (`tracker`: the
+    Pipeline's, None: AutoTrack with `params`).
 
     Returns (captured frames, 4) 0-based boxes, NaN rows for dropped frames, and the summary.
     The reader must be started.
@@ -111,7 +116,7 @@ def track_live(
         targets.append(pipeline.add_target(frame_index, box, landmark_id=None))
 
     boxes: dict[int, tuple[float, float, float, float]] = {}
-    for frame, outcome in run_live(log, params, start, map_window=0):
+    for frame, outcome in run_live(log, params, start, tracker=tracker, map_window=0):
         boxes[frame.index] = outcome.tracks[targets[0]].box
         if on_result is not None:
             on_result(frame, outcome)
@@ -123,18 +128,22 @@ def track_live(
 
 
 def warm_up(
-    params: TrackerParams, frame_size: tuple[int, int] | None, boxes: Sequence[Sequence[float]]
+    params: TrackerParams,
+    frame_size: tuple[int, int] | None,
+    boxes: Sequence[Sequence[float]],
+    tracker_name: str | None = None,
 ) -> None:
-    """Run a throwaway tracker on a noise frame of the source's size from each box, so that
-    loading the compiled kernels and planning the FFTs happen before the first live frame
-    (otherwise the first frames are dropped while they do)."""
-    from autotrack.tracker.tracker import AutoTrack
+    """Run a throwaway tracker (`tracker_name`, None: AutoTrack of `params`) on a noise frame
+    of the source's size from each box, so that loading the compiled kernels and planning the
+    FFTs happen before the first live frame (otherwise the first frames are dropped while they
+    do)."""
+    from autotrack.hybrid.factory import make_tracker
 
     if frame_size is None:
         return
     width, height = frame_size
     frame = np.random.default_rng(0).integers(0, 256, (height, width, 3), dtype=np.uint8)
     for box in boxes:
-        tracker = AutoTrack(params)
+        tracker = make_tracker(tracker_name or params.name, params)
         tracker.init(frame, box)
         tracker.update(frame)

@@ -28,6 +28,7 @@ def localize_sequence(
     tracker_params: TrackerParams,
     localizer_params: LocalizerParams | None = None,
     *,
+    tracker: str | None = None,
     recording: Recording | None = None,
     fps: float | None = None,
     threads: int = 1,
@@ -41,7 +42,8 @@ def localize_sequence(
 
     `frames` is a FrameSource or a list of RGB frames. `init_boxes` gives the first frame's
     boxes (x, y, w, h, 0-based pixels): landmark id -> box, or a list of boxes whose landmarks
-    the correspondence search finds on the first frame (boxes.json's two forms).
+    the correspondence search finds on the first frame (boxes.json's two forms). `tracker`:
+    `nanotrack` or `hybrid` to track with them (the Pipeline's; None: AutoTrack).
     `refine_params` turns on the sub-pixel refinement of the landmark points
     (`localization.refine`), `reacquire_params` the out-of-view gate and re-acquisition of lost
     landmarks (`localization.reacquire`; it uses the refiner's templates, so it turns refinement
@@ -57,6 +59,7 @@ def localize_sequence(
     with Pipeline(
         frames,
         tracker_params,
+        tracker=tracker,
         scene=scene,
         localizer_params=localizer_params,
         recording=recording,

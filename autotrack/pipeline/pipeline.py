@@ -22,6 +22,7 @@ from typing import Any
 import numpy as np
 
 from autotrack.errors import InputError
+from autotrack.hybrid.factory import tracker_name
 from autotrack.io.frames import FrameCache, FrameSource
 from autotrack.localization.localizer import LocalizerParams
 from autotrack.localization.reacquire import ReacquireParams
@@ -59,7 +60,11 @@ class Pipeline:
 
     Args:
         frames: The sequence.
-        params: Tracker parameters for every target.
+        params: Tracker parameters for every target (for the hybrid: its correlation
+            filter's; `autotrack.hybrid.factory.tracker_params` gives a tracker's own).
+        tracker: `nanotrack` or `hybrid` to track every target with them
+            (`autotrack.hybrid.factory`; in threads, never child processes); None or a preset
+            name: AutoTrack with `params`. `tracker_name` says which one runs.
         scene: Localisation scene (None: no poses).
         localizer_params: Localiser settings (None: the library defaults).
         recording: Where to record the session (None: not recorded).
@@ -80,6 +85,7 @@ class Pipeline:
         frames: FrameSource,
         params: TrackerParams,
         *,
+        tracker: str | None = None,
         scene: Scene | None = None,
         localizer_params: LocalizerParams | None = None,
         recording: Recording | None = None,
@@ -99,6 +105,9 @@ class Pipeline:
             scene.camera.check_image_size(*frames.frame_size)
         self.frames = frames
         self.params = params
+        self.tracker_name = tracker_name(tracker, params)
+        """The tracker every target runs: `nanotrack`, `hybrid` or the AutoTrack preset name
+        of `params` (recorded in the session)."""
         self.scene = scene
         self.recording = recording
         self.fps = fps if fps is not None else frames.fps
@@ -111,7 +120,9 @@ class Pipeline:
         self.resumed_from: Path | None = None
         self.resume_frame = 0
         """After `resume`: the frame tracking continues from."""
-        self._groups = TrackerGroups(params, tracker_threads, tracker_processes, worker_pool)
+        self._groups = TrackerGroups(
+            params, tracker_threads, tracker_processes, worker_pool, self.tracker_name
+        )
         self._posing = (
             None
             if scene is None
@@ -136,7 +147,7 @@ class Pipeline:
         tracker_threads: int = 1,
         **pose_options: Any,
     ) -> Pipeline:
-        """Continue a recorded session on `frames` with its recorded tracker parameters.
+        """Continue a recorded session on `frames` with its recorded tracker and parameters.
 
         Its results and poses become this pipeline's history (copied into the new recording,
         which names the session as `resumed_from`), and each live target restarts from its
@@ -147,6 +158,7 @@ class Pipeline:
         pipeline = cls(
             frames,
             session.tracker_params(),
+            tracker=session.tracker_name,
             scene=scene,
             localizer_params=localizer_params,
             recording=recording,
@@ -244,7 +256,12 @@ class Pipeline:
             if self.scene is not None:
                 landmark_positions(self.scene)  # its ids are refused before the file exists
             self._recorder = open_recorder(
-                self.recording, self.params, self.fps, self.resumed_from, self.frames
+                self.recording,
+                self.params,
+                self.tracker_name,
+                self.fps,
+                self.resumed_from,
+                self.frames,
             )
             if self.scene is not None:
                 self._recorder.log_landmarks(self.scene)

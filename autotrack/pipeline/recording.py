@@ -36,14 +36,17 @@ class Recording:
 def open_recorder(
     recording: Recording,
     params: TrackerParams,
+    tracker: str,
     fps: float | None,
     resumed_from: Path | None,
     frames: FrameSource,
 ) -> SessionRecorder:
-    """A new SessionRecorder for `recording` (the file is created here)."""
+    """A new SessionRecorder for `recording` (the file is created here); `tracker` names the
+    tracker `params` are for (`Pipeline.tracker_name`)."""
     options = {
         "source": recording.source,
         "tracker_params": params,
+        "tracker": tracker,
         "scene_path": recording.scene_path,
         "fps": fps,
         "resumed_from": resumed_from,

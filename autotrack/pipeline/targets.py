@@ -16,8 +16,9 @@ from autotrack.tracker.inputs import validate_box
 
 Box = tuple[float, float, float, float]
 
-SIGNAL_NAMES = ("peak_score", "global_variation", "theta_ref", "theta", "aberrant")
-"""Per-target, per-frame numbers kept as arrays over the sequence (for plots)."""
+SIGNAL_NAMES = ("peak_score", "global_variation", "theta_ref", "theta", "aberrant", "trusted")
+"""Per-target, per-frame numbers kept as arrays over the sequence (for plots); `trusted` is
+the hybrid's `autotrack.hybrid.factory.trusted_code` (NaN for other trackers)."""
 
 
 def checked_box(frame: np.ndarray, box: Box, owner: str | None = None) -> Box:
@@ -87,7 +88,10 @@ class TrackedTarget:
         arrays = {}
         for name in SIGNAL_NAMES:
             values = np.full(self.frame_count, np.nan)
-            column = results.aberrant if name == "aberrant" else results.column(name)
+            if name in ("aberrant", "trusted"):
+                column = getattr(results, name)
+            else:
+                column = results.column(name)
             values[results.frames] = column
             arrays[name] = values
         return arrays

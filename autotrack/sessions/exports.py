@@ -65,8 +65,9 @@ def write_otb_tracks(
 
 def write_tracks_csv(session: Session, path: str | Path, *, overwrite: bool = False) -> Path:
     """Combined CSV: frame (0-based), target, landmark (the one it localises, else empty), x, y,
-    w, h (0-based pixels), score, aberrant (0/1); one row per frame and target with a box,
-    ordered by frame then target."""
+    w, h (0-based pixels), score, aberrant (0/1), trusted (the hybrid's `both`, `filter` or
+    `siamese`, else empty); one row per frame and target with a box, ordered by frame then
+    target."""
     rows = []
     targets = session.exported_targets
     for frame_index in session.frame_indices.tolist():
@@ -77,8 +78,12 @@ def write_tracks_csv(session: Session, path: str | Path, *, overwrite: bool = Fa
             score = float(session.scores[target_id][frame_index])
             flag = int(session.aberrant[target_id][frame_index])
             landmark = session.landmark_ids.get(target_id) or ""
-            rows.append([frame_index, target_id, landmark, *(float(v) for v in box), score, flag])
-    header = ["frame", "target", "landmark", "x", "y", "w", "h", "score", "aberrant"]
+            trusted = session.trusted.get(target_id)
+            choice = "" if trusted is None else str(trusted[frame_index])
+            rows.append(
+                [frame_index, target_id, landmark, *(float(v) for v in box), score, flag, choice]
+            )
+    header = ["frame", "target", "landmark", "x", "y", "w", "h", "score", "aberrant", "trusted"]
     try:
         return write_csv(path, header, rows, overwrite=overwrite)
     except FileExistsError as error:

@@ -15,6 +15,7 @@ from typing import Any, Protocol
 import numpy as np
 
 from autotrack.errors import SessionError
+from autotrack.hybrid.factory import trusted_of
 from autotrack.io.ids import checked_identifier
 from autotrack.result import TrackResult
 from autotrack.sessions.encoding import (
@@ -256,6 +257,7 @@ def target_messages(
         "response_range": ranges[TargetStream.RESPONSE],
         "local_variation_range": ranges[TargetStream.LOCAL_VARIATION],
         "spatial_window_range": ranges[TargetStream.SPATIAL_WINDOW],
+        "trusted": trusted_of(result),
     }
     batch: list[Message] = [(TargetTopic(target_id, TargetStream.SIGNALS).topic, signals)]
     if all(math.isfinite(v) for v in box):

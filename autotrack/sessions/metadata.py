@@ -73,15 +73,20 @@ def session_metadata(
     source: str,
     fps: float,
     fps_given: bool,
-    params: dict[str, Any],
+    tracker_params: TrackerParams | Mapping[str, Any],
     scene_path: str | Path | None,
+    tracker: str | None = None,
     embed_frames: bool,
     record_maps: bool,
     flush_interval: float,
     resumed_from: str | Path | None,
     live_source: bool = False,
 ) -> dict[str, str]:
-    """The session metadata record (every value a string, as MCAP metadata requires)."""
+    """The session metadata record (every value a string, as MCAP metadata requires);
+    `tracker` None: the preset `tracker_params` describe (none for a plain dict)."""
+    params = params_dict(tracker_params)
+    if tracker is None and isinstance(tracker_params, TrackerParams):
+        tracker = tracker_params.name
     return {
         **path_entries("source", source),
         **path_entries("scene_path", scene_path),
@@ -93,6 +98,7 @@ def session_metadata(
         "fps": repr(fps),
         "fps_given": "true" if fps_given else "false",
         "tracker_params": json.dumps(params, sort_keys=True),
+        "tracker": tracker or "",
         "embed_frames": "true" if embed_frames else "false",
         "record_maps": "true" if record_maps else "false",
         "live_source": "true" if live_source else "false",

@@ -16,6 +16,7 @@ from mcap.records import Attachment, Channel, Message, Metadata, Schema
 
 import autotrack
 from autotrack.errors import SessionError
+from autotrack.hybrid.factory import TRUSTED
 from autotrack.sessions.encoding import (
     DEFAULT_FPS,
     FORMAT_VERSION,
@@ -184,6 +185,7 @@ class _SessionBuilder:
             signals={target_id: column.signals for target_id, column in columns.items()},
             landmark_ids={target_id: column.landmark_id for target_id, column in columns.items()},
             search_boxes={target_id: column.search_boxes for target_id, column in columns.items()},
+            trusted={target_id: column.trusted for target_id, column in columns.items()},
             poses=self._pose_track(),
             events=tuple(self.events),
             landmarks=dict(self.landmarks),
@@ -295,6 +297,8 @@ class _TargetColumns:
     landmark_id: str | None
     times: dict[int, tuple[int, Any, Any]]
     """Log time -> (frame index, response range, local-variation range), to match the maps."""
+    trusted: np.ndarray
+    """The hybrid's trusted tracker per frame ('' where none is recorded)."""
 
     @classmethod
     def of(cls, rows: Mapping[int, dict[str, Any]], count: int) -> _TargetColumns:
@@ -302,6 +306,7 @@ class _TargetColumns:
         search_boxes = np.full((count, 4), np.nan)
         scores = np.full(count, np.nan)
         aberrant = np.zeros(count, dtype=bool)
+        trusted = np.full(count, "", dtype=f"<U{max(map(len, TRUSTED))}")
         signals = {name: np.full(count, np.nan) for name in _SIGNAL_NAMES}
         times: dict[int, tuple[int, Any, Any]] = {}
         landmark_id = None
@@ -311,6 +316,8 @@ class _TargetColumns:
                 search_boxes[frame_index] = [none_to_nan(v) for v in row["search_box"]]
             scores[frame_index] = none_to_nan(row.get("peak_score"))
             aberrant[frame_index] = bool(row.get("aberrant"))
+            if row.get("trusted") in TRUSTED:
+                trusted[frame_index] = row["trusted"]
             for name in _SIGNAL_NAMES:
                 signals[name][frame_index] = none_to_nan(row.get(name))
             stamp = row["timestamp"]
@@ -321,7 +328,7 @@ class _TargetColumns:
                 row.get("local_variation_range"),
             )
             landmark_id = row.get("landmark_id")
-        return cls(boxes, scores, aberrant, signals, search_boxes, landmark_id, times)
+        return cls(boxes, scores, aberrant, signals, search_boxes, landmark_id, times, trusted)
 
 
 def open_session(path: str | Path, *, load_maps: bool = False) -> Session:

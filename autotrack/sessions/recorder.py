@@ -36,7 +36,7 @@ from autotrack.sessions.encoding import (
     encode_json,
     frame_time_ns,
 )
-from autotrack.sessions.metadata import params_dict, path_text, session_metadata
+from autotrack.sessions.metadata import path_text, session_metadata
 from autotrack.sessions.names import (
     check_event_kind,
     check_landmark_id,
@@ -87,6 +87,7 @@ class SessionRecorder:
         *,
         source: str,
         tracker_params: TrackerParams | Mapping[str, Any],
+        tracker: str | None = None,
         scene_path: str | Path | None = None,
         fps: float | None = None,
         embed_frames: bool = False,
@@ -101,6 +102,7 @@ class SessionRecorder:
 
         source: what was tracked (sequence folder, video file, camera name).
         tracker_params: the parameters of the tracker(s) of this session.
+        tracker: its name (`nanotrack`, `hybrid`; None: the preset `tracker_params` describe).
         scene_path: localisation scene file; recorded by name and embedded as an attachment.
         fps: frame rate of the source; log times are frame_index / fps (DEFAULT_FPS if None).
         embed_frames: record the video frames (`log_frame`, `log_encoded_frame`) on the camera
@@ -127,14 +129,14 @@ class SessionRecorder:
         self.jpeg_quality = int(jpeg_quality)
         self.flush_interval = float(flush_interval)
         self._fsync = bool(fsync)
-        params = params_dict(tracker_params)
         scene_bytes = None if scene_path is None else _read_scene(scene_path)
         # Everything is checked and built before the file exists: a refusal leaves no file.
         self.metadata = session_metadata(
             source=source,
             fps=self.fps,
             fps_given=fps is not None,
-            params=params,
+            tracker_params=tracker_params,
+            tracker=tracker,
             scene_path=scene_path,
             embed_frames=self.embed_frames,
             record_maps=self.record_maps,

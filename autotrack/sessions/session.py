@@ -11,6 +11,7 @@ from typing import Any
 import numpy as np
 
 from autotrack.errors import SessionError
+from autotrack.hybrid.factory import with_trusted
 from autotrack.params import TrackerParams
 from autotrack.result import PoseEstimate, TrackResult
 from autotrack.sessions.metadata import recorded_path
@@ -106,6 +107,10 @@ class Session:
     file_size: int
     search_boxes: dict[str, np.ndarray] = field(default_factory=dict, repr=False)
     """Target id -> (N, 4) search regions (x, y, w, h) of the recorded results; NaN where none."""
+    trusted: dict[str, np.ndarray] = field(default_factory=dict, repr=False)
+    """Target id -> (N,) str: which tracker the hybrid trusted on each frame (`both`, `filter`,
+    `siamese`: `autotrack.hybrid.factory.TRUSTED`); '' where none is recorded (another
+    tracker, or no result)."""
     scene_attachment: bytes | None = field(default=None, repr=False)
     """Contents of the scene file recorded with the session, if any."""
     being_recorded: bool = False
@@ -163,6 +168,12 @@ class Session:
         """Video time covered by the recorded frames (seconds at the session's fps)."""
         return len(self.frame_indices) / self.fps
 
+    @property
+    def tracker_name(self) -> str:
+        """The recorded tracker (`nanotrack`, `hybrid` or an AutoTrack preset; a session
+        recorded before trackers were named: the preset its parameters describe)."""
+        return str(self.metadata.get("tracker") or "") or self.tracker_params().name
+
     def tracker_params(self) -> TrackerParams:
         """The recorded tracker parameters as TrackerParams (to resume tracking)."""
         recorded = dict(self.metadata.get("tracker_params") or {})
@@ -177,16 +188,18 @@ class Session:
 
     def recorded_targets(self) -> dict[str, RecordedTarget]:
         """Every target that is not deleted, with its recorded results (maps are not recorded
-        in full, so results carry none) and the box to resume it from."""
+        in full, so results carry none; a hybrid's are `HybridResult`s saying whom it trusted)
+        and the box to resume it from."""
         targets = {}
         for target_id in self.exported_targets:
             boxes = self.tracks[target_id]
             signals = self.signals[target_id]
             results = {}
+            trusted = self.trusted.get(target_id)
             for frame_index in np.flatnonzero(np.isfinite(boxes).all(axis=1)).tolist():
                 search = self.search_boxes.get(target_id)
                 search_box = None if search is None else search[frame_index]
-                results[frame_index] = TrackResult(
+                result = TrackResult(
                     frame_index=frame_index,
                     box=_box(boxes[frame_index]),
                     peak_score=float(self.scores[target_id][frame_index]),
@@ -201,6 +214,9 @@ class Session:
                     if search_box is None or not np.isfinite(search_box).all()
                     else _box(search_box),
                 )
+                if trusted is not None and trusted[frame_index]:
+                    result = with_trusted(result, str(trusted[frame_index]))
+                results[frame_index] = result
             targets[target_id] = RecordedTarget(
                 id=target_id,
                 landmark_id=self.landmark_ids.get(target_id),

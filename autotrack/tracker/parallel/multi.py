@@ -51,19 +51,25 @@ class MultiTracker:
         colour_table: np.ndarray | None = None,
         processes: int = 1,
         worker_pool: WorkerPool | None = None,
+        new_tracker: Callable[[], AutoTrack] | None = None,
     ) -> None:
         """`target_ids` fixes the targets `init` expects (empty: whatever `init` is given);
         `threads` > 1 runs this process's targets concurrently; `processes` > 1 spreads the
         targets over this process and up to `processes - 1` child processes, each taken from
         `worker_pool` (None: a pool of this tracker's own, closed with it) when a target is
-        first given to it."""
+        first given to it. `new_tracker` makes each target's tracker instead of an AutoTrack
+        of `params` (any tracker with its call shape: `autotrack.hybrid.factory`); the child
+        processes run AutoTrack only, so it needs `processes` 1."""
         if threads < 1:
             raise InputError(f"threads must be at least 1, got {threads}")
         if processes < 1:
             raise InputError(f"processes must be at least 1, got {processes}")
         if processes > 1 and os.name != "posix":
             raise InputError("tracking in several processes needs a POSIX system (Linux, macOS)")
+        if new_tracker is not None and processes > 1:
+            raise InputError("child processes track with AutoTrack only: use threads")
         self.params = params
+        self._make_tracker = new_tracker
         self.colour_table = colour_table
         self.threads = threads
         self.processes = processes
@@ -202,6 +208,8 @@ class MultiTracker:
     # -- internals --------------------------------------------------------------------------
 
     def _new_tracker(self) -> AutoTrack:
+        if self._make_tracker is not None:
+            return self._make_tracker()
         return AutoTrack(self.params, colour_table=self.colour_table)
 
     def _start(self, target_id: str, frame: np.ndarray, box: Box) -> TrackResult:
