@@ -8,12 +8,13 @@ together against the faithful preset, OpenCV CSRT and the authors' own outputs; 
 P@20 / AUC; and how the `autotrack+` mean moves when each new parameter is halved and doubled.
 
     python benchmarks/ablation.py --jobs 2 [--update-doc] [--no-sensitivity]
-    python benchmarks/ablation.py --hybrid [--no-sensitivity] [--speed] --out /tmp/ablation
+    python benchmarks/ablation.py --hybrid [--no-sensitivity] [--speed] [--update-doc] --out DIR
 
-With `--hybrid` only the faithful preset, `autotrack+`, NanoTrack and the hybrid variants run,
+With `--hybrid` only the faithful preset, `autotrack+`, CSRT, NanoTrack and the hybrid variants run,
 and the table compares them: mean P@20 / AUC, per-sequence AUC, the sequences where a variant is
 worse than NanoTrack by more than 0.05 AUC, frames/s on one thread; `--speed` adds frames/s of
-NanoTrack, `autotrack+` and the hybrid on one thread on frames resized to 1280x720.
+NanoTrack, `autotrack+` and the hybrid on one thread on frames resized to 1280x720;
+`--update-doc` rewrites the table in docs/hybrid.md and its means in docs/benchmarks.md.
 """
 
 from __future__ import annotations
@@ -34,9 +35,11 @@ from hybrid_ablation import (
     NANOTRACK,
     PLUS,
     build_hybrid_table,
+    hybrid_summary,
     hybrid_variants,
     mean_scores,
     new_box_tracker,
+    replace_marked,
     speed_1280x720,
 )
 
@@ -52,7 +55,7 @@ REPO = Path(__file__).resolve().parents[1]
 SHARED = REPO / ".." / "shared" / "data"
 OFFICIAL = SHARED / "reference" / "autotrack_official"
 DOC = REPO / "docs" / "benchmarks.md"
-START, END = "<!-- ablation:start -->", "<!-- ablation:end -->"
+HYBRID_DOC = REPO / "docs" / "hybrid.md"
 
 
 ABLATION: dict[str, dict] = {
@@ -366,9 +369,7 @@ def _sensitivity_lines(results: dict, scores: dict, names: list[str]) -> list[st
 
 def update_doc(tables: str) -> None:
     """Replace the ablation section of docs/benchmarks.md (between its markers)."""
-    text = DOC.read_text()
-    head, rest = text.split(START, 1)
-    DOC.write_text(head + START + "\n" + tables + "\n" + END + rest.split(END, 1)[1])
+    replace_marked(DOC, tables, "ablation")
 
 
 def main() -> None:
@@ -381,7 +382,11 @@ def main() -> None:
         "--resume-only", action="store_true", help="tabulate what is saved, run nothing"
     )
     parser.add_argument("--only", default=None, help="comma-separated labels: run just these")
-    parser.add_argument("--update-doc", action="store_true", help=f"rewrite the tables in {DOC}")
+    parser.add_argument(
+        "--update-doc",
+        action="store_true",
+        help="rewrite the tables in the docs (with --hybrid: docs/hybrid.md and docs/benchmarks.md)",
+    )
     parser.add_argument("--hybrid", action="store_true", help="NanoTrack and the hybrid table")
     parser.add_argument("--speed", action="store_true", help="with --hybrid: fps on 1280x720")
     args = parser.parse_args()
@@ -394,9 +399,14 @@ def main() -> None:
         results = run_all(sequences, hybrid_table, args.out, args.jobs, args.resume_only)
         scores = {label: _scores(sequences, runs) for label, runs in results.items()}
         fps = {label: _fps(runs) for label, runs in results.items()}
-        print(build_hybrid_table(sequences, scores, fps))
+        table = build_hybrid_table(sequences, scores, fps)
+        print(table)
         if args.speed:
             print(speed_1280x720(next(s for s in sequences if s.name == "S1301")))
+        if args.update_doc:
+            replace_marked(HYBRID_DOC, table)
+            replace_marked(DOC, "\n".join(hybrid_summary(sequences, scores, fps)))
+            print(f"updated {HYBRID_DOC} and {DOC}")
         return
     table = variants(sensitivity=not args.no_sensitivity)
     if args.only:

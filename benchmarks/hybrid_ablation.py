@@ -5,6 +5,7 @@ they are made, their table, and frames/s on one thread on 1280x720 frames."""
 from __future__ import annotations
 
 from dataclasses import replace
+from pathlib import Path
 
 import numpy as np
 
@@ -20,6 +21,7 @@ HYBRID = "hybrid"
 HYBRID_VARIANTS: dict[str, dict] = {
     HYBRID: {},
     f"{HYBRID} without box averaging": {"average_boxes": False},
+    f"{HYBRID} without size weighting": {"size_weighted": False},
     f"{HYBRID} with filter re-initialisation": {"reinit_filter": True},
     f"{HYBRID} without Siamese re-placing": {"place_siamese": False},
     f"{HYBRID} without continuity": {"continuity": False},
@@ -68,15 +70,18 @@ def _hybrid_row(label: str, scores: dict, names: list[str], fps: dict) -> str:
     return f"| {label} | {p:.3f} | {a:.3f} | {len(worse)} {' '.join(worse)} | {fps[label]:.1f} |"
 
 
-def build_hybrid_table(sequences, scores: dict, fps: dict) -> str:
-    """The hybrid's table from {label: {sequence: SequenceScore}} and {label: median frames/s}:
-    each tracker's mean and per-sequence scores, the sequences where it is worse than NanoTrack
-    by more than 0.05 AUC, the sensitivity rows."""
+def _labels(scores: dict) -> list[str]:
+    return [
+        label for label in (FAITHFUL, PLUS, "csrt", NANOTRACK, *HYBRID_VARIANTS) if label in scores
+    ]
+
+
+def hybrid_summary(sequences, scores: dict, fps: dict) -> list[str]:
+    """The means table (docs/benchmarks.md's NanoTrack and hybrid rows): each tracker's mean
+    P@20 / AUC and the sequences where it is worse than NanoTrack by more than 0.05 AUC."""
     names = [s.name for s in sequences]
-    results = scores
-    main = [FAITHFUL, PLUS, "csrt", NANOTRACK, *HYBRID_VARIANTS]
-    labels = [label for label in main if label in results]
-    lines = [
+    labels = _labels(scores)
+    return [
         f"{len(sequences)} sequences, {sum(len(s) for s in sequences)} frames, one thread per "
         "tracker process. *worse than NanoTrack*: sequences whose AUC is below NanoTrack's by "
         "more than 0.05.",
@@ -84,6 +89,16 @@ def build_hybrid_table(sequences, scores: dict, fps: dict) -> str:
         "| tracker | P@20 | AUC | worse than NanoTrack | fps (median) |",
         "|---|---|---|---|---|",
         *(_hybrid_row(label, scores, names, fps) for label in labels),
+    ]
+
+
+def build_hybrid_table(sequences, scores: dict, fps: dict) -> str:
+    """The hybrid's table from {label: {sequence: SequenceScore}} and {label: median frames/s}:
+    `hybrid_summary`, each tracker's per-sequence AUC, the sensitivity rows."""
+    names = [s.name for s in sequences]
+    labels = _labels(scores)
+    lines = [
+        *hybrid_summary(sequences, scores, fps),
         "",
         "Per sequence, AUC:",
         "",
@@ -93,7 +108,7 @@ def build_hybrid_table(sequences, scores: dict, fps: dict) -> str:
     for sequence in sequences:
         cells = [f"{scores[label][sequence.name].auc:.3f}" for label in labels]
         lines.append(f"| {sequence.dataset}/{sequence.name} | " + " | ".join(cells) + " |")
-    sensitivity = [label for label in results if label.startswith(f"{HYBRID} ") and " x" in label]
+    sensitivity = [label for label in scores if label.startswith(f"{HYBRID} ") and " x" in label]
     if sensitivity:
         base_p, base_a = mean_scores(scores[HYBRID], names)
         lines += [
@@ -114,6 +129,14 @@ def build_hybrid_table(sequences, scores: dict, fps: dict) -> str:
                 cells.append(f"{p:.3f} / {a:.3f} ({p - base_p:+.3f} / {a - base_a:+.3f})")
             lines.append(f"| `{name}` | " + " | ".join(cells) + " |")
     return "\n".join(lines)
+
+
+def replace_marked(path: Path, text: str, marker: str = "hybrid") -> None:
+    """Replace the text between `<!-- {marker}:start -->` and `<!-- {marker}:end -->` in a doc."""
+    start, end = f"<!-- {marker}:start -->", f"<!-- {marker}:end -->"
+    document = path.read_text()
+    head, rest = document.split(start, 1)
+    path.write_text(head + start + "\n" + text + "\n" + end + rest.split(end, 1)[1])
 
 
 def speed_1280x720(sequence, frames: int = 120, rounds: int = 2) -> str:

@@ -11,7 +11,15 @@ import pytest
 from autotrack.evaluation.datasets import load_otb_sequence
 from autotrack.evaluation.metrics import score_sequence
 from autotrack.hybrid import HybridParams, HybridResult, HybridTracker, fuse
-from autotrack.hybrid.tracker import BOTH, FILTER, SIAMESE, centres_agree, inside_frame
+from autotrack.hybrid.tracker import (
+    BOTH,
+    FILTER,
+    SIAMESE,
+    centres_agree,
+    inside_frame,
+    inverse_area_weight,
+    mean_box,
+)
 from autotrack.result import TrackResult
 from tests.conftest import needs_sequences, shared_sequence_dir
 
@@ -40,12 +48,19 @@ NEAR = (102.0, 101.0, 20.0, 20.0)  # the target moved a little
 FAR = (160.0, 100.0, 20.0, 20.0)  # a look-alike three box widths away
 
 
-def test_agreeing_trackers_average_their_boxes():
+def test_agreeing_trackers_average_their_boxes_weighted_by_inverse_area():
     siamese = (104.0, 103.0, 16.0, 24.0)
-    decision = fuse(_result(NEAR), _result(siamese), 0.9, PREVIOUS, PARAMS)
+    plain = fuse(_result(NEAR), _result(siamese), 0.9, PREVIOUS, HybridParams(size_weighted=False))
+    assert plain.trusted == BOTH
+    assert plain.box == pytest.approx((103.0, 102.0, 18.0, 22.0))
+    assert not plain.reinit_filter and not plain.place_siamese
+    # A Siamese box twice the filter's sides (four times its area) weighs a fifth.
+    large = (92.0, 91.0, 40.0, 40.0)
+    decision = fuse(_result(NEAR), _result(large), 0.9, PREVIOUS, PARAMS)
     assert decision.trusted == BOTH
-    assert decision.box == pytest.approx((103.0, 102.0, 18.0, 22.0))
-    assert not decision.reinit_filter and not decision.place_siamese
+    assert decision.box == pytest.approx((0.8 * 102 + 0.2 * 92, 0.8 * 101 + 0.2 * 91, 24.0, 24.0))
+    assert inverse_area_weight(NEAR, large) == pytest.approx(0.8)
+    assert inverse_area_weight(large, NEAR) == pytest.approx(0.2)
     centred = fuse(
         _result(NEAR), _result(siamese), 0.9, PREVIOUS, HybridParams(average_boxes=False)
     )
@@ -139,6 +154,10 @@ def test_the_hybrid_restarts_the_filter_or_moves_the_siamese_track_on_real_frame
     assert all(isinstance(r, HybridResult) for r in results)
     assert [r.frame_index for r in results] == [0, 1, 2, 3]
     assert results[-1].trusted == BOTH
+    own = results[-1].filter_result.box, results[-1].siamese_result.box
+    weight = inverse_area_weight(*own)
+    assert 0.0 < weight < 1.0 and weight != 0.5
+    assert results[-1].box == pytest.approx(mean_box(*own, weight))  # the weighted mean
     with sequence.frames() as frames:
         frame = frames.read(4)
     stuck_box = (5.0, 5.0, 30.0, 30.0)  # the top-left corner, far from the gull

@@ -43,3 +43,10 @@ def test_the_table_counts_sequences_worse_than_nanotrack_and_prints_sensitivity(
     assert "| D/bad | 0.952 | " in table  # NanoTrack first (a box equal to the truth)
     assert "| `agree_radius` | 1.000 / 0.952 (+0.500 / +" in table
     assert "| `siamese_confident` | not run | not run |" in table
+
+
+def test_update_doc_replaces_only_the_marked_table(tmp_path):
+    doc = tmp_path / "doc.md"
+    doc.write_text("before\n<!-- hybrid:start -->\nold\n<!-- hybrid:end -->\nafter\n")
+    hybrid_ablation.replace_marked(doc, "| new |")
+    assert doc.read_text() == "before\n<!-- hybrid:start -->\n| new |\n<!-- hybrid:end -->\nafter\n"

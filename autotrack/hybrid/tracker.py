@@ -10,9 +10,13 @@ probability. Targets move continuously; a jump to a look-alike, or a filter re-l
 background, does not. The rule (`fuse`):
 
 1. Both agree on the centre (each centre within `agree_radius` of the other's box half-sides):
-   the mean of the two boxes. Two trackers that see one object with errors of their own (the
-   filter's fixed aspect, the network's coarse 16-pixel cells) average to a better box than
-   either. Nobody is re-initialised: each stays an independent estimate.
+   the mean of the two boxes, each weighted by the inverse of its area. Two trackers that see
+   one object with errors of their own (the filter's fixed aspect, the network's coarse 16-pixel
+   cells) average to a better box than either. A tracker's error grows with the size of the box
+   it reports (its search region, its cells and its scale steps all scale with it), so the
+   inverse-variance weights are 1/area: the box that spread over the target and its
+   surroundings (a Siamese box grown over a herd, a filter box that kept a boat's first aspect
+   after it turned) counts less. Nobody is re-initialised: each stays an independent estimate.
 2. They disagree. Each is *credible* when its own evidence is good and it moved continuously
    (its centre within `agree_radius` of its own last box: no jump): the filter when it learnt
    this frame (not held), the Siamese network when its foreground probability is at least
@@ -64,6 +68,9 @@ class HybridParams:
     target rather than background."""
     average_boxes: bool = True
     """Rule 1 averages the two boxes (else it takes the filter's centre and the Siamese shape)."""
+    size_weighted: bool = True
+    """Rule 1 weights each box by the inverse of its area (else the plain mean): inverse-variance
+    weights when each tracker's error is proportional to the side of the box it reports."""
     reinit_filter: bool = False
     """Rule 2 re-initialises the filter on a credible Siamese box (else the filter keeps
     tracking on its own)."""
@@ -127,9 +134,18 @@ def siamese_probability(result: TrackResult, peak_cell: tuple[int, int]) -> floa
     return float(result.response_map[peak_cell])
 
 
-def mean_box(first: Sequence[float], second: Sequence[float]) -> Box:
-    """The element-wise mean of two (x, y, w, h) boxes."""
-    return tuple((float(u) + float(v)) / 2.0 for u, v in zip(first, second, strict=True))
+def mean_box(first: Sequence[float], second: Sequence[float], weight: float = 0.5) -> Box:
+    """The element-wise weighted mean of two (x, y, w, h) boxes, `weight` on the first."""
+    return tuple(
+        weight * float(u) + (1.0 - weight) * float(v) for u, v in zip(first, second, strict=True)
+    )
+
+
+def inverse_area_weight(first: Sequence[float], second: Sequence[float]) -> float:
+    """The first box's share of an inverse-variance mean of two boxes whose errors have standard
+    deviations proportional to their sides: 1/area_1 / (1/area_1 + 1/area_2)."""
+    first_area, second_area = first[2] * first[3], second[2] * second[3]
+    return float(second_area / (first_area + second_area))
 
 
 def jump(box: Sequence[float], previous: Sequence[float]) -> float:
@@ -154,7 +170,8 @@ def fuse(
     radius = params.agree_radius
     if centres_agree(filter_box, siamese_box, radius):  # rule 1
         if params.average_boxes:
-            return Decision(mean_box(filter_box, siamese_box), BOTH, False, False)
+            weight = inverse_area_weight(filter_box, siamese_box) if params.size_weighted else 0.5
+            return Decision(mean_box(filter_box, siamese_box, weight), BOTH, False, False)
         (cx, cy), (_, _, w, h) = centre(filter_box), siamese_box
         return Decision((cx - w / 2.0, cy - h / 2.0, w, h), BOTH, False, False)
     filter_credible = not filter_held(filter_result)
