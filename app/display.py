@@ -106,7 +106,9 @@ def map_panel_image(view: FrameView, target_id: str) -> np.ndarray:
         map_tile(drawing.previous_response, "previous response"),
         map_tile(None if result is None else result.response_map, "response"),
         map_tile(None if result is None else result.local_variation, "local variation", "robust"),
-        map_tile(drawing.weights, weights_title(drawing.weights_frame, view.frame_index), "log"),
+        map_tile(
+            drawing.weights, weights_title(drawing.weights, drawing.weights_frame, view), "log"
+        ),
     )
     gap = np.full((tiles[0].shape[0], 4, 3), 255, np.uint8)
     rows = [np.concatenate([tiles[i], gap, tiles[i + 1]], axis=1) for i in (0, 2)]
@@ -130,9 +132,12 @@ def missing_map_note(view: FrameView, map_kind: str | None) -> str:
     )
 
 
-def weights_title(trained: int | None, frame_index: int) -> str:
-    """The ASR tile's title: says when the weights are those of an earlier frame's training."""
-    if trained is None or trained == frame_index:
+def weights_title(weights: np.ndarray | None, trained: int | None, view: FrameView) -> str:
+    """The ASR tile's title: says when the weights are those of an earlier frame's training,
+    and when there are none (a tracker that learns no filter, such as NanoTrack)."""
+    if weights is None:
+        return "no ASR weights"
+    if trained is None or trained == view.frame_index:
         return "ASR weights u"
     return f"ASR u (trained frame {trained + 1})"
 

@@ -21,6 +21,7 @@ from autotrack.errors import InputError
 from autotrack_studio.boxes import format_box, parse_box
 from autotrack_studio.config import AppConfig
 from autotrack_studio.controller import TabController
+from autotrack_studio.display import weights_title
 from autotrack_studio.recordings import RecordingRegistry
 from autotrack_studio.targets_table import targets_table
 
@@ -899,6 +900,9 @@ def test_nanotrack_and_hybrid_chosen_in_the_app_track_show_their_maps_and_are_re
             plotted["global_variation"], [r.global_variation for r in expected]
         )
         assert np.isnan(plotted["trusted"]).all()
+        drawing = view.drawings[target_id]  # NanoTrack learns no filter: its tile says so
+        assert drawing.weights is None
+        assert weights_title(drawing.weights, drawing.weights_frame, view) == "no ASR weights"
         nano_session = controller.run.session_path
 
         controller.seek(0)
