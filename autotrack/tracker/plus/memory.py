@@ -140,10 +140,11 @@ def disambiguate(
     With one distinct peak nothing changes (None, False). With several, the candidates are the
     global maximum, the peaks nearer the expected displacement than it (zero, or the motion
     prior's prediction) and the peaks where the memory responds more than 1 + `margin` times
-    what it does at the global maximum; of those the one with the most joint evidence (`choose_peak`, with the motion
-    prior if given) is taken; if that is the global maximum, (None, True). So the memory takes
-    a track back from a distractor it knows is not the target, and never moves it onto a
-    look-alike it cannot tell from the target (a walker in a group, a car in a queue).
+    what it does at the global maximum; of those the one with the most joint evidence
+    (`choose_peak`, with the motion prior if given) is taken; if that is the global maximum,
+    (None, True). So the memory takes a track back from a distractor it knows is not the
+    target, and never moves it onto a look-alike it cannot tell from the target (a walker in
+    a group, a car in a queue).
     """
     peaks = distinct_peaks(response, ratio, separation)
     if len(peaks) < 2:

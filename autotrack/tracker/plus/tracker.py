@@ -60,7 +60,7 @@ class AutoTrackPlus(AutoTrack, beyond_release=True):
             disp_row, disp_col, peak_score = chosen
         confident = self._is_confident(peak_score, response)
         self.unconfident_frames = 0 if confident else self.unconfident_frames + 1
-        if self.unconfident_frames >= max(p.redetect_patience, 1) and p.redetect_span:
+        if self.unconfident_frames >= p.redetect_patience and p.redetect_span:
             found = self._redetect(image, peak_score)
             if found is not None:
                 zf, response, (disp_row, disp_col, peak_score), search_box = found
@@ -232,14 +232,17 @@ class AutoTrackPlus(AutoTrack, beyond_release=True):
 
     def _turns_resolved(self) -> bool:
         """Whether one `rotation_step` moves the ends of the target's long side by half a
-        feature cell or more, the finest shift the sub-cell peak resolves. On a smaller
-        target (a car of 11 x 8 px: 0.9 px at 10 degrees) a turn is not seen, only noise is,
-        and each spurious turn reshapes the reported box (rotation.bounding_size)."""
-        step = self.params.rotation_step
-        if not step:
+        feature cell or more, in image pixels: a cell is `cell_size` x the scale factor, and
+        never less than `cell_size` (a small target's patch is upsampled, which adds cells,
+        not detail). On a smaller target (a car of 11 x 8 px: 0.95 px at 10 degrees against
+        2 px) a turn is not seen, only noise is, and each spurious turn reshapes the reported
+        box (rotation.bounding_size)."""
+        p = self.params
+        if not p.rotation_step:
             return False
         half_long_side = float(np.max(self._box_size_hw())) / 2.0
-        return half_long_side * math.sin(math.radians(step)) >= self.params.cell_size / 2.0
+        half_cell = p.cell_size * max(self.scale, 1.0) / 2.0
+        return half_long_side * math.sin(math.radians(p.rotation_step)) >= half_cell
 
     def _upright(self, image: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(image, position) for the scale filter: the frame itself, or with the target turned,
