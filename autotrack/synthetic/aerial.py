@@ -106,12 +106,11 @@ class AerialSequence:
     """Rendered frames and the target's box on each."""
 
     name: str
+    """The scene's name."""
     frames: list[np.ndarray]
     """RGB uint8 frames."""
     boxes: np.ndarray
     """(frames, 4) target boxes (x, y, w, h), 0-based pixels."""
-    others: np.ndarray
-    """(frames, movers - 1, 2) centres (x, y) of the other movers in the image."""
 
 
 def _ground(kind: str, rng: np.random.Generator, height: int, width: int) -> np.ndarray:
@@ -260,7 +259,7 @@ def render_aerial(spec: AerialSpec) -> AerialSequence:
     canopy = _canopy(np.random.default_rng(spec.seed + 4), ground_h, ground_w)
     noise_rng = np.random.default_rng(spec.seed + 2)
     shake = _shake(np.random.default_rng(spec.seed + 3), spec.frames, spec.shake_px)
-    frames, boxes, others = [], [], []
+    frames, boxes = [], []
     for index in range(spec.frames):
         drift = np.array(spec.drift_xy) * index + shake[index]
         camera = origin + drift
@@ -272,7 +271,6 @@ def render_aerial(spec: AerialSpec) -> AerialSequence:
             flags=cv2.INTER_LINEAR | cv2.WARP_INVERSE_MAP,
             borderMode=cv2.BORDER_REFLECT,
         )
-        centres = []
         for k, mover in enumerate(spec.movers):
             mx, my = mover.centre(index)
             cx, cy = mx - drift[0], my - drift[1]
@@ -285,10 +283,8 @@ def render_aerial(spec: AerialSpec) -> AerialSequence:
                 jitter = np.random.default_rng(spec.seed + 10 + k)  # the same clothes every frame
                 sprite = _walker_sprite(mover.size_hw, mover.colour_rgb, jitter, stride)
             _blend(view, sprite, box)
-            centres.append((cx, cy))
             if k == 0:
                 boxes.append(box)
-        others.append(centres[1:])
         for start, end in spec.shadows:
             left, right = _band(start - drift[0], end - drift[0], spec.width)
             view[:, left:right] *= spec.shadow_gain
@@ -301,8 +297,7 @@ def render_aerial(spec: AerialSpec) -> AerialSequence:
             boxes[-1] = box
         view += noise_rng.normal(0.0, spec.noise_sigma, view.shape).astype(np.float32)
         frames.append(np.clip(view, 0, 255).astype(np.uint8))
-    other_centres = np.array(others, dtype=np.float64).reshape(spec.frames, -1, 2)
-    return AerialSequence(spec.name, frames, np.array(boxes), other_centres)
+    return AerialSequence(spec.name, frames, np.array(boxes))
 
 
 SCENES = ("road_lookalikes", "walker_group", "tiny_vehicle")
