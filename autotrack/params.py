@@ -126,6 +126,12 @@ class TrackerParams:
     """When the confidence is below the gate, search a square `redetect_span` times the search
     region's side (redetect.wide_search_offset) and move there if it is confident and beats the
     local peak; 0 = never. 3: one full search region beyond the current one in every direction."""
+    redetect_patience: int = 1
+    """Re-detection may move the tracker only once this many consecutive frames (this one
+    included) were below the confidence gate: the target is lost by its own evidence, not
+    dimmed for a frame. 1 = on the first such frame. 3 in `autotrack+`: a frame or two below
+    the gate is a pole, a tree crown or another vehicle passing over the target, and a wide
+    search then finds a look-alike as readily as the target."""
     scale_model_min_side: float = 0.0
     """Smallest side (pixels) of a resampled scale sample; 0 = the release's (area <= 512 only).
     16 px = four fHOG cells, so a thin target keeps interior cells across its short side."""
@@ -139,6 +145,13 @@ class TrackerParams:
     distinct peak the peak with the most joint evidence of both filters is taken. 0 = off. 0.01:
     LCT's long-term learning rate, a memory of ~100 learnt frames (10 s at 10 fps); in
     `autotrack+`."""
+    memory_margin: float = 0.25
+    """The memory may move the track to a peak farther from the expected displacement than the
+    response's maximum only where the memory responds more than 1 + this times what it does
+    at the maximum (memory.disambiguate): it must tell the two apart. 0.25: look-alikes the
+    memory cannot tell apart (walkers dressed alike) differ by up to ~10 % in its response
+    from frame to frame on the generated walker group; a distractor of another pattern that
+    dragged the track off (the passing look-alike of tests/sequences.py) by ~50 %."""
     distractor_ratio: float = 0.5
     """A second local maximum of the response at least this fraction of the first counts as a
     distractor (memory.distinct_peaks). 0.5: half the target's own peak, the level above which
@@ -186,6 +199,8 @@ class TrackerParams:
             problems.append("num_scales must be >= 1 and scale_step > 1")
         if not 0 < self.variation_floor <= 1 or not 0 < self.confidence_memory <= 1:
             problems.append("variation_floor and confidence_memory must be in (0, 1]")
+        if self.memory_margin < 0:
+            problems.append("memory_margin must be >= 0")
         if not 0 <= self.memory_rate <= 1 or not 0 < self.distractor_ratio <= 1:
             problems.append("memory_rate must be in [0, 1] and distractor_ratio in (0, 1]")
         if self.num_aspects < 0 or self.velocity_weight < 0:
@@ -196,6 +211,8 @@ class TrackerParams:
             problems.append("rotation_step must be in [0, 90) degrees, rotation_margin >= 0")
         if self.confidence_gate < 0 or self.redetect_span < 0 or self.scale_model_min_side < 0:
             problems.append("confidence_gate, redetect_span, scale_model_min_side must be >= 0")
+        if self.redetect_patience < 1:
+            problems.append("redetect_patience must be at least 1")
         if self.redetect_span and not (self.redetect_span > 1 and self.confidence_gate > 0):
             problems.append("redetect_span needs a confidence_gate and must be > 1")
         if self.colour_feature not in ("lab11", "table", "none"):
@@ -257,6 +274,7 @@ PRESETS: dict[str, TrackerParams] = {
         acting_asr=True,
         confidence_gate=0.7,
         redetect_span=3.0,
+        redetect_patience=3,
         scale_model_min_side=16.0,
         memory_rate=0.01,
         rotation_step=10.0,

@@ -87,6 +87,8 @@ SENSITIVE = (
     "distractor_ratio",
     "rotation_step",
     "rotation_margin",
+    "redetect_patience",
+    "memory_margin",
 )
 """The parameters `autotrack+` uses or adds (delta is the release's, but it acts only here)."""
 

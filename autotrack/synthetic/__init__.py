@@ -8,7 +8,8 @@ truth (camera poses, intrinsics, landmark positions, per-frame landmark boxes) i
 
 `world` (the room, its landmarks and planes), `textures` (procedural, seeded), `trajectories`
 (what a sequence is and what changes along it), `renderer` (frames and ground-truth files),
-`testbed` (the written test bed and the app's embedded demo).
+`testbed` (the written test bed and the app's embedded demo); `aerial` (top-down drone scenes
+of the tracker's failure patterns: look-alike cars, a walker in a group, a tiny car).
 
 World frame: x right, y forward (towards the back wall), z up, metres. Camera: OpenCV convention.
 """

@@ -133,17 +133,38 @@ def disambiguate(
     ratio: float,
     separation: float,
     motion: MotionPrior | None = None,
+    margin: float = 0.0,
 ) -> tuple[tuple[float, float, float] | None, bool]:
     """(the peak to take instead of the global maximum, or None; whether a distractor is present).
 
-    With one distinct peak nothing changes (None, False). With several, the peak with the most
-    joint evidence (`choose_peak`, with the motion prior if given) is taken; if that is the
-    global maximum, (None, True).
+    With one distinct peak nothing changes (None, False). With several, the candidates are the
+    global maximum, the peaks nearer the expected displacement than it (zero, or the motion
+    prior's prediction) and the peaks where the memory responds more than 1 + `margin` times
+    what it does at the global maximum; of those the one with the most joint evidence
+    (`choose_peak`, with the motion prior if given) is taken; if that is the global maximum,
+    (None, True). So the memory takes a track back from a distractor it knows is not the
+    target, and never moves it onto a look-alike it cannot tell from the target (a walker in
+    a group, a car in a queue).
     """
     peaks = distinct_peaks(response, ratio, separation)
     if len(peaks) < 2:
         return None, False
+    expected = motion.predicted if motion is not None else (0.0, 0.0)
+    reach = _cell_distance(peaks[0], expected, response.shape)
+    held = _near_max(memory_response, peaks[0])
+    peaks = [peaks[0]] + [
+        peak
+        for peak in peaks[1:]
+        if _cell_distance(peak, expected, response.shape) < reach
+        or _near_max(memory_response, peak) > (1.0 + margin) * held
+    ]
     chosen = choose_peak(response, memory_response, peaks, motion)
     if chosen == 0:
         return None, True
     return subcell_peak(response, peaks[chosen]), True
+
+
+def _cell_distance(cell: tuple[int, int], expected: tuple[float, float], shape) -> float:
+    """Distance (cells) of a peak's wrapped displacement from an expected displacement."""
+    row, col = _wrap(cell[0], shape[0]), _wrap(cell[1], shape[1])
+    return math.hypot(row - expected[0], col - expected[1])

@@ -39,6 +39,7 @@ class AutoTrackPlus(AutoTrack, beyond_release=True):
             robust.ResponseConfidence(p.confidence_memory) if p.confidence_gate > 0 else None
         )
         self.velocity = np.zeros(2)
+        self.unconfident_frames = 0  # consecutive frames below the confidence gate
         self.motion = motion.MotionModel(p.confidence_memory) if p.motion_prior else None
         return result
 
@@ -58,11 +59,13 @@ class AutoTrackPlus(AutoTrack, beyond_release=True):
         if chosen is not None:
             disp_row, disp_col, peak_score = chosen
         confident = self._is_confident(peak_score, response)
-        if not confident and p.redetect_span:
+        self.unconfident_frames = 0 if confident else self.unconfident_frames + 1
+        if self.unconfident_frames >= p.redetect_patience and p.redetect_span:
             found = self._redetect(image, peak_score)
             if found is not None:
                 zf, response, (disp_row, disp_col, peak_score), search_box = found
                 confident = True
+                self.unconfident_frames = 0
                 start = None  # a jump, not a motion to extrapolate
         if self.confidence is not None:
             self.confidence.observe(peak_score, robust.apce(response), p.confidence_gate)
@@ -156,14 +159,18 @@ class AutoTrackPlus(AutoTrack, beyond_release=True):
         if self.motion is not None:
             floor = self.params.motion_prior * min(self._box_size_hw())
             prior = self.motion.prior(floor, self.params.cell_size * self.scale)
-        return memory.disambiguate(response, memory_response, ratio, separation, prior)
+        margin = self.params.memory_margin
+        return memory.disambiguate(response, memory_response, ratio, separation, prior, margin)
 
-    def _is_confident(self, peak_score: float, response: np.ndarray) -> bool:
-        """Whether this detection clears the confidence gate (always True without a gate)."""
+    def _is_confident(
+        self, peak_score: float, response: np.ndarray, gate: float | None = None
+    ) -> bool:
+        """Whether this detection clears the confidence gate, or `gate` if given (always True
+        without a gate)."""
         if self.confidence is None:
             return True
         confidence = self.confidence.confidence(peak_score, robust.apce(response))
-        return confidence >= self.params.confidence_gate
+        return confidence >= (self.params.confidence_gate if gate is None else gate)
 
     def _redetect(self, image: np.ndarray, local_peak: float):
         """Wider search (redetect.py); moves the tracker and returns its detection, or None."""
@@ -200,21 +207,42 @@ class AutoTrackPlus(AutoTrack, beyond_release=True):
         """(features spectrum, response, (row, col, peak)) at the current angle; with
         `rotation_step`, when that peak fell below the last frame's (a turn lowers the match) or
         the target turned on the last frame, one step either way is tried and taken if it wins
-        (`rotation.turn_wins`: a peak higher by `rotation_margin`, a response as sharp)."""
+        (`rotation.turn_wins`: a peak higher by `rotation_margin`, a response as sharp) and
+        still matches the filter: a confidence of at least the gate squared (0.49, the gate's
+        APCE level). A turning target keeps about half its usual peak (MotorRolling's flips:
+        0.52 and up); a lost tracker's samples of the background score 0.1-0.2 upright or
+        turned, and a turn taken then only spins the filter away from where re-detection would
+        find the target. No turn on a target too small to show one (`_turns_resolved`)."""
         p = self.params
         sampler = self._sampler(image)
         best = self._detect_patch(sampler.patch(self.angle))
         last_peak, self.last_peak = self.last_peak, best[2][2]
-        if not p.rotation_step or (best[2][2] >= last_peak and not self.turning):
+        if not self._turns_resolved() or (best[2][2] >= last_peak and not self.turning):
             return best
         best_angle = self.angle
         for angle in rotation.candidate_angles(self.angle, p.rotation_step)[1:]:
             turned = self._detect_patch(sampler.patch(angle))
-            if rotation.turn_wins(turned[1:], best[1:], p.rotation_margin):
+            if rotation.turn_wins(turned[1:], best[1:], p.rotation_margin) and (
+                self._is_confident(turned[2][2], turned[1], p.confidence_gate**2)
+            ):
                 best, best_angle = turned, angle
         self.turning = best_angle != self.angle
         self.angle = rotation.wrapped(best_angle)
         return best
+
+    def _turns_resolved(self) -> bool:
+        """Whether one `rotation_step` moves the ends of the target's long side by half a
+        feature cell or more, in image pixels: a cell is `cell_size` x the scale factor, and
+        never less than `cell_size` (a small target's patch is upsampled, which adds cells,
+        not detail). On a smaller target (a car of 11 x 8 px: 0.95 px at 10 degrees against
+        2 px) a turn is not seen, only noise is, and each spurious turn reshapes the reported
+        box (rotation.bounding_size)."""
+        p = self.params
+        if not p.rotation_step:
+            return False
+        half_long_side = float(np.max(self._box_size_hw())) / 2.0
+        half_cell = p.cell_size * max(self.scale, 1.0) / 2.0
+        return half_long_side * math.sin(math.radians(p.rotation_step)) >= half_cell
 
     def _upright(self, image: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(image, position) for the scale filter: the frame itself, or with the target turned,

@@ -1,0 +1,109 @@
+"""`autotrack+` fail-safe on the generated aerial scenes (autotrack/synthetic/aerial.py): each
+mechanism acts only when its own evidence says the target is lost or changing.
+
+Each scene reproduces a pattern seen on unseen UAV sequences where `autotrack+` did worse than
+the faithful preset; before the fixes every test below failed (AUC on the two seeds' mean:
+road 0.49 against the faithful 0.80, walkers 0.42 against 0.73, tiny car 0.42 against 0.75;
+one-frame jumps of 38-64 px onto another car, a tiny car's box reshaped to 0.65 of its aspect).
+"""
+
+from __future__ import annotations
+
+from dataclasses import replace
+
+import numpy as np
+import pytest
+
+from autotrack import AutoTrack, preset
+from autotrack.errors import InputError
+from autotrack.evaluation.metrics import center_errors, score_sequence
+from autotrack.params import TrackerParams
+from autotrack.synthetic.aerial import SCENES, aerial_scene, render_aerial
+
+SEEDS = (1, 2)
+
+
+def _track(params: TrackerParams, sequence) -> np.ndarray:
+    tracker = AutoTrack(params)
+    boxes = [tracker.init(sequence.frames[0], sequence.boxes[0]).box]
+    boxes += [tracker.update(frame).box for frame in sequence.frames[1:]]
+    return np.array(boxes)
+
+
+def _jumps(boxes: np.ndarray, truth: np.ndarray) -> np.ndarray:
+    """Per frame, how far the box centre moved beyond the true centre's own motion (px)."""
+    centres = boxes[:, :2] + boxes[:, 2:] / 2
+    true_centres = truth[:, :2] + truth[:, 2:] / 2
+    return np.hypot(*np.diff(centres - true_centres, axis=0).T)
+
+
+@pytest.fixture(scope="module", params=SCENES)
+def scene_runs(request):
+    """(scene name, [(sequence, faithful boxes, autotrack+ boxes) per seed])."""
+    runs = []
+    for seed in SEEDS:
+        sequence = render_aerial(aerial_scene(request.param, seed))
+        runs.append(
+            (
+                sequence,
+                _track(preset("autotrack"), sequence),
+                _track(preset("autotrack+"), sequence),
+            )
+        )
+    return request.param, runs
+
+
+def test_plus_is_not_worse_than_the_faithful_preset_on_a_failure_pattern(scene_runs):
+    name, runs = scene_runs
+    faithful = np.mean([score_sequence(name, f, s.boxes).auc for s, f, _ in runs])
+    plus = np.mean([score_sequence(name, p, s.boxes).auc for s, _, p in runs])
+    assert plus >= faithful - 0.05, (name, plus, faithful)
+
+
+def test_plus_never_jumps_a_target_length_in_one_frame_nor_ends_off_it(scene_runs):
+    # Re-detection, a turn or the memory moving a confident track onto a look-alike shows as
+    # a jump of the box against the truth; the faithful preset's largest is 6 px (the tiny
+    # car under a tree crown).
+    # The memory taking a neighbour in the walker group is a slide of 9-13 px, not a jump:
+    # it shows as a track that ends on another walker, a target width or more off.
+    name, runs = scene_runs
+    for sequence, _, plus in runs:
+        length, width = float(np.max(sequence.boxes[0, 2:])), float(np.min(sequence.boxes[0, 2:]))
+        assert _jumps(plus, sequence.boxes).max() < length, name
+        assert center_errors(plus, sequence.boxes)[-10:].max() < width, name
+
+
+def test_plus_keeps_the_box_size_and_shape_of_the_target(scene_runs):
+    name, runs = scene_runs
+    for sequence, _, plus in runs:
+        area = plus[:, 2] * plus[:, 3] / (sequence.boxes[:, 2] * sequence.boxes[:, 3])
+        aspect = (plus[:, 2] / plus[:, 3]) / (sequence.boxes[:, 2] / sequence.boxes[:, 3])
+        assert np.all((area > 1 / 1.5) & (area < 1.5)), name
+        assert np.all((aspect > 0.8) & (aspect < 1.25)), name
+
+
+def test_re_detection_waits_for_a_loss_and_a_turn_for_a_target_large_enough_to_show_one():
+    sequence = render_aerial(aerial_scene("road_lookalikes", 1))
+    plus = preset("autotrack+")
+    hasty = replace(plus, redetect_patience=1)  # re-detection on the first frame below the gate
+    assert _jumps(_track(hasty, sequence), sequence.boxes).max() > 24.0  # onto another car
+    assert _jumps(_track(plus, sequence), sequence.boxes).max() < 24.0
+    tiny = AutoTrack(plus)
+    tiny_sequence = render_aerial(aerial_scene("tiny_vehicle", 1))
+    tiny.init(tiny_sequence.frames[0], tiny_sequence.boxes[0])
+    assert not tiny._turns_resolved()  # 11 px: a 10 degree turn moves its ends by < 1 px
+    large = AutoTrack(plus)
+    large.init(tiny_sequence.frames[0], (100.0, 100.0, 40.0, 20.0))
+    assert large._turns_resolved()
+
+
+def test_aerial_scenes_are_seeded_and_bad_names_refused():
+    first = render_aerial(replace(aerial_scene("tiny_vehicle", 3), frames=3))
+    again = render_aerial(replace(aerial_scene("tiny_vehicle", 3), frames=3))
+    np.testing.assert_array_equal(first.frames[2], again.frames[2])
+    assert first.frames[0].shape == (240, 320, 3) and first.boxes.shape == (3, 4)
+    np.testing.assert_allclose(first.boxes[0, 2:], (11, 8))
+    with pytest.raises(InputError, match="unknown aerial scene"):
+        aerial_scene("highway")
+    with pytest.raises(InputError, match="at least 2 frames"):
+        render_aerial(replace(aerial_scene("tiny_vehicle"), frames=1))
