@@ -224,7 +224,7 @@ class AutoTrackPlus(AutoTrack, beyond_release=True):
             return image, self.position
         steps = self.scale_filter.scale_steps[0] ** 2
         largest = np.max(self.scale_filter.base_target_size_hw) * self.scale * steps
-        side = int(math.ceil(largest * math.sqrt(2.0))) + 2
+        side = int(math.ceil(largest)) + 2
         return rotation.upright_view(image, self.position, self.angle, side)
 
     def _sampler(self, image: np.ndarray) -> rotation.TurnedSampler:
