@@ -201,3 +201,35 @@ def test_trial_turns_of_the_upright_patch_match_the_enlarged_region_inside():
         shared = upright_first.patch(angle)
         assert difference(shared, turned_first.patch(angle)) < 1.2 * grids_apart
         assert difference(shared, turned_first.patch(-angle)) > 2.0 * grids_apart
+
+
+@pytest.mark.parametrize("size_hw", [(200, 200), (150, 210), (101, 64)])
+def test_turned_margin_holds_the_turned_corners_and_no_more(size_hw):
+    """Every output pixel of a patch turned by an angle of the pool maps inside the enlarged
+    sample (bilinear reads stay in it), and one pixel less of margin would not hold them."""
+    rows, cols = size_hw
+    for pool in ((0.0, 10.0, -10.0), (35.0, 45.0, 25.0), (180.0, 190.0, 170.0), (90.0,)):
+        margin = rotation.turned_margin(size_hw, pool)
+        assert margin <= rotation.turned_margin(size_hw, None)
+
+        def overshoot(margin: int) -> float:
+            big_hw = (rows + 2 * margin, cols + 2 * margin)
+            worst = -np.inf
+            for angle in pool:
+                matrix = rotation._inverse_map(
+                    angle,
+                    ((big_hw[1] - 1) / 2, (big_hw[0] - 1) / 2),
+                    ((cols - 1) / 2, (rows - 1) / 2),
+                )
+                corners = np.array(
+                    [[0, 0, 1], [cols - 1, 0, 1], [0, rows - 1, 1], [cols - 1, rows - 1, 1]]
+                )
+                x, y = matrix @ corners.T.astype(float)
+                worst = max(
+                    worst, -x.min(), -y.min(), x.max() - (big_hw[1] - 1), y.max() - (big_hw[0] - 1)
+                )
+            return worst
+
+        assert overshoot(margin) <= 0.0, pool
+        if margin > 0:
+            assert overshoot(margin - 1) > -1.0, pool

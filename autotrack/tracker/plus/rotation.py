@@ -49,6 +49,21 @@ def _warp(source: np.ndarray, matrix: np.ndarray, size_hw: tuple[int, int]) -> n
     )
 
 
+def turned_margin(size_hw: tuple[int, int], angles_deg: tuple[float, ...] | None) -> int:
+    """Pixels around a (rows, cols) patch that hold its corners turned by any of `angles_deg`
+    (the bound of the turned rectangle); any angle when None (half the diagonal's excess over
+    the shorter side: (sqrt 2 - 1) / 2 of a square's side)."""
+    rows, cols = size_hw
+    if angles_deg is None:
+        return math.ceil((math.hypot(rows, cols) - min(rows, cols)) / 2.0)
+    margin = 0
+    for angle in angles_deg:
+        cos, sin = abs(math.cos(math.radians(angle))), abs(math.sin(math.radians(angle)))
+        height, width = rows * cos + cols * sin, cols * cos + rows * sin
+        margin = max(margin, math.ceil(max(height - rows, width - cols) / 2.0))
+    return margin
+
+
 class TurnedSampler:
     """`sampling.search_patch` of one frame's search region in the frame turned by any angle,
     with one area resampling per frame whatever the angles asked for.
@@ -61,6 +76,7 @@ class TurnedSampler:
     - Once a turned patch is asked for before any at angle 0 (the target is turned), the
       region is resampled once with a margin that covers its turned corners (area averaging,
       as the release) and every angle, 0 too, is turned from it at the patch's resolution.
+      `angles_deg`, the angles that may be asked for, sizes the margin (`turned_margin`).
     """
 
     def __init__(
@@ -70,12 +86,13 @@ class TurnedSampler:
         region_size_hw: tuple[int, int],
         output_size_hw: tuple[int, int],
         sample=search_patch,
+        angles_deg: tuple[float, ...] | None = None,
     ) -> None:
         self.image, self.position = image, position
         self.search_patch = sample  # `sampling.search_patch` or a backend's (the same pixels)
         self.region_size_hw = region_size_hw
         self.rows, self.cols = int(output_size_hw[0]), int(output_size_hw[1])
-        margin = math.ceil(max(self.rows, self.cols) * (math.sqrt(2.0) - 1.0) / 2.0)
+        margin = turned_margin((self.rows, self.cols), angles_deg)
         self.big_hw = (self.rows + 2 * margin, self.cols + 2 * margin)
         self.big: np.ndarray | None = None
         self.upright: np.ndarray | None = None  # the patch at angle 0, when sampled first
@@ -137,6 +154,19 @@ def candidate_angles(angle_deg: float, step_deg: float) -> tuple[float, ...]:
     if not step_deg:
         return (angle_deg,)
     return (angle_deg, angle_deg + step_deg, angle_deg - step_deg)
+
+
+def turns_may_win(peak: float, last_peak: float, turning: bool, margin: float) -> bool:
+    """Whether this frame's trial turns are worth sampling: the target turned on the last frame
+    (it is turning), or the current angle's peak fell below the last frame's by more than
+    `margin` (a turn lowers the match).
+
+    A turn wins only with a peak higher than the current one by `margin` (`turn_wins`); a turned
+    sample matches the filter at best about as well as the last frame's target did (the filter
+    was trained on it), so while the peak is within `margin` of the last frame's no trial can
+    usually win, and sampling them costs two more detections.
+    """
+    return turning or peak * (1.0 + margin) < last_peak
 
 
 def turn_wins(turned: tuple, current: tuple, margin: float) -> bool:

@@ -205,7 +205,9 @@ class AutoTrackPlus(AutoTrack, beyond_release=True):
         sampler = self._sampler(image)
         best = self._detect_patch(sampler.patch(self.angle))
         last_peak, self.last_peak = self.last_peak, best[2][2]
-        if not p.rotation_step or (best[2][2] >= last_peak and not self.turning):
+        if not p.rotation_step or not rotation.turns_may_win(
+            best[2][2], last_peak, self.turning, p.rotation_margin
+        ):
             return best
         best_angle = self.angle
         for angle in rotation.candidate_angles(self.angle, p.rotation_step)[1:]:
@@ -232,9 +234,9 @@ class AutoTrackPlus(AutoTrack, beyond_release=True):
         rows, cols = self._search_region()
         output = (int(self.window_size[0]), int(self.window_size[1]))
         region = (int(rows), int(cols))
-        return rotation.TurnedSampler(
-            image, self.position, region, output, self.backend.search_patch
-        )
+        angles = rotation.candidate_angles(self.angle, self.params.rotation_step)
+        sample = self.backend.search_patch
+        return rotation.TurnedSampler(image, self.position, region, output, sample, angles)
 
     def _features_spectrum(self, image: np.ndarray) -> np.ndarray:
         patch = self._sampler(image).patch(self.angle)
