@@ -156,19 +156,6 @@ def candidate_angles(angle_deg: float, step_deg: float) -> tuple[float, ...]:
     return (angle_deg, angle_deg + step_deg, angle_deg - step_deg)
 
 
-def turns_may_win(peak: float, last_peak: float, turning: bool, margin: float) -> bool:
-    """Whether this frame's trial turns are worth sampling: the target turned on the last frame
-    (it is turning), or the current angle's peak fell below the last frame's by more than
-    `margin` (a turn lowers the match).
-
-    A turn wins only with a peak higher than the current one by `margin` (`turn_wins`); a turned
-    sample matches the filter at best about as well as the last frame's target did (the filter
-    was trained on it), so while the peak is within `margin` of the last frame's no trial can
-    usually win, and sampling them costs two more detections.
-    """
-    return turning or peak * (1.0 + margin) < last_peak
-
-
 def turn_wins(turned: tuple, current: tuple, margin: float) -> bool:
     """Whether a turned sample's detection, (response, (row, col, peak)), beats the current
     angle's: a peak higher by `margin` and a response at least as sharp (APCE, robust.apce).

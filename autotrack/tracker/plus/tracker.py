@@ -205,9 +205,7 @@ class AutoTrackPlus(AutoTrack, beyond_release=True):
         sampler = self._sampler(image)
         best = self._detect_patch(sampler.patch(self.angle))
         last_peak, self.last_peak = self.last_peak, best[2][2]
-        if not p.rotation_step or not rotation.turns_may_win(
-            best[2][2], last_peak, self.turning, p.rotation_margin
-        ):
+        if not p.rotation_step or (best[2][2] >= last_peak and not self.turning):
             return best
         best_angle = self.angle
         for angle in rotation.candidate_angles(self.angle, p.rotation_step)[1:]:
