@@ -54,3 +54,41 @@ def test_the_autotrack_command_is_this_environments():
     command = speed.autotrack_command()
     run = speed.whole_process([*command, "--help"])
     assert run["wall"] > 0.0
+
+
+_THREADS_SCRIPT = """
+import os, sys
+import cv2
+from autotrack.evaluation.datasets import load_otb_sequence
+from autotrack.evaluation.runs import single_thread
+from autotrack.io.frames import read_image
+from autotrack.nanotrack import NanoTrack
+sequence = load_otb_sequence(sys.argv[1])[0]
+frames = [read_image(path) for path in sequence.frame_paths[:4]]
+with single_thread():
+    if sys.argv[2] != "1":
+        cv2.setNumThreads(int(sys.argv[2]))
+    before = len(os.listdir("/proc/self/task"))
+    tracker = NanoTrack()
+    tracker.init(frames[0], sequence.init_box)
+    for frame in frames[1:]:
+        tracker.update(frame)
+    print(len(os.listdir("/proc/self/task")) - before)
+"""
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="counts threads in /proc")
+def test_nanotrack_runs_its_networks_on_the_benchmarks_one_thread():
+    """Under `runs.single_thread` (how `bench` and speed.py track) cv2.dnn starts no worker
+    thread for NanoTrack's networks; with two OpenCV threads it does (the check can fail)."""
+    import subprocess
+
+    sequence = str(speed.UAV123 / speed.RATIO_SEQUENCE)
+
+    def new_threads(opencv_threads: int) -> int:
+        command = [sys.executable, "-c", _THREADS_SCRIPT, sequence, str(opencv_threads)]
+        done = subprocess.run(command, capture_output=True, text=True, check=True)
+        return int(done.stdout.split()[-1])
+
+    assert new_threads(1) == 0
+    assert new_threads(2) > 0
