@@ -23,18 +23,25 @@ from autotrack import AutoTrack, preset
 from autotrack.evaluation.datasets import load_otb_sequence
 from autotrack.io.frames import read_image
 from autotrack.tracker import scale, tracker
+from autotrack.tracker.backend.fast import FastBackend
+from autotrack.tracker.plus.tracker import AutoTrackPlus
 
 STEPS = (
-    (tracker.AutoTrack, "_spectrum", "features, window, FFT"),
-    (tracker.dcf, "detection_response", "detection response (eq. 16)"),
-    (tracker.dcf, "newton_peak", "Newton sub-cell peak"),
+    (FastBackend, "search_patch", "search patch (sampling)"),
+    (FastBackend, "feature_spectrum", "features, window, FFT"),
+    (FastBackend, "response", "detection response (eq. 16)"),
+    (FastBackend, "peak", "Newton sub-cell peak"),
     (tracker.AutoTrack, "_regularize", "variations, eta, ASR (eqs. 2-4)"),
+    (AutoTrackPlus, "_regularize", "autotrack+ variations, eta, ASR (eqs. 2-4)"),
+    (AutoTrackPlus, "_disambiguate", "autotrack+ memory: look-alike check"),
+    (AutoTrackPlus, "_is_confident", "autotrack+ confidence gate"),
     (scale.ScaleFilter, "detect", "scale filter: detect"),
     (tracker.dcf, "shift_spectrum", "shift of the features"),
     (tracker.AutoTrack, "_train", "ADMM training (eqs. 8-15)"),
     (scale.ScaleFilter, "update", "scale filter: update"),
 )
-"""(owner, attribute, label) of the steps of `AutoTrack.update` timed by `step_times`."""
+"""(owner, attribute, label) of the steps of `AutoTrack.update` (the fast backend's, and
+autotrack+'s own) timed by `step_times`; nested steps count in both."""
 
 
 def step_times(run) -> dict[str, float]:
@@ -42,22 +49,23 @@ def step_times(run) -> dict[str, float]:
     spent: Counter[str] = Counter()
     originals = []
     for owner, name, label in STEPS:
-        original = getattr(owner, name)
-        originals.append((owner, name, original))
+        stored = vars(owner)[name]  # a staticmethod stays one
+        originals.append((owner, name, stored))
+        function = stored.__func__ if isinstance(stored, staticmethod) else stored
 
-        def timed(*args, _original=original, _label=label, **kwargs):
+        def timed(*args, _original=function, _label=label, **kwargs):
             start = time.process_time()
             try:
                 return _original(*args, **kwargs)
             finally:
                 spent[_label] += time.process_time() - start
 
-        setattr(owner, name, timed)
+        setattr(owner, name, staticmethod(timed) if isinstance(stored, staticmethod) else timed)
     try:
         run()
     finally:
-        for owner, name, original in originals:
-            setattr(owner, name, original)
+        for owner, name, stored in originals:
+            setattr(owner, name, stored)
     return dict(spent)
 
 

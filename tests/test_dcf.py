@@ -245,3 +245,65 @@ def test_local_variation_equals_aligning_then_centring_bit_for_bit():
             release = np.roll(release, (shape[0] // 2, shape[1] // 2), (0, 1))
             got = regularization.local_variation(response, shifts[:2], previous, shifts[2:])
             np.testing.assert_array_equal(got, release.astype(np.float32))
+
+
+def _full_spectrum_training(x, y, g_prev, window, theta, settings):
+    """ADMM of eqs. 8-15 on full complex128 spectra (np.fft.fft2), the h-step taking the real
+    part of its inverse: the textbook form the half-spectrum reference stands for."""
+    num_cells = window.size
+    xf, yf, g_prev_f = np.fft.fft2(x), np.fft.fft2(y), np.fft.fft2(g_prev)
+    h_f = l_f = np.zeros_like(xf)
+    gamma = settings.gamma_init
+    for iteration in range(1, settings.iterations + 1):
+        g_f = dcf.g_step(xf, yf, h_f, l_f, g_prev_f, gamma, theta, num_cells)
+        if iteration == settings.iterations:
+            return g_f
+        gain = num_cells / (settings.lambda_spatial * window**2 + gamma * num_cells)
+        h_f = np.fft.fft2(gain * np.fft.ifft2(gamma * (g_f + l_f)).real)
+        l_f = dcf.multiplier_update(l_f, g_f, h_f, gamma)
+        gamma = dcf.next_gamma(gamma, settings)
+    return g_f
+
+
+def test_half_spectrum_training_equals_the_full_complex_one(tmp_path):
+    """`dcf.train_filter` on rfft2 half spectra gives the non-negative-frequency half of the
+    filter the same ADMM computes on full complex spectra (float32 rounding apart), on the
+    feature maps of a real frame; its inverse is a real filter."""
+    from autotrack.evaluation.datasets import load_otb_sequence
+    from autotrack.io.frames import read_image
+    from autotrack.params import TrackerParams
+    from autotrack.tracker import features, sampling
+    from tests.conftest import REPO
+
+    sequence = load_otb_sequence(REPO / ".." / "shared" / "data" / "sequences" / "OTB" / "Dog1")[0]
+    frame = read_image(sequence.frame_paths[0])
+    params = TrackerParams()
+    grid = (40, 40)
+    patch = sampling.search_patch(frame, (130.0, 160.0), (160, 160), (160, 160))
+    maps = features.feature_maps(patch, params, None, dcf.cosine_window(grid))
+    label = dcf.gaussian_label(grid, 2.0).astype(np.float32)
+    g_prev = np.random.default_rng(2).standard_normal(maps.shape).astype(np.float32) * 1e-3
+    window = regularization.base_spatial_window(grid, (8, 8), 1e5, 1e-3)
+    settings = dcf.admm_settings(params)
+    theta = 12.0
+    g_half, _ = dcf.train_filter(
+        dcf.to_spectrum(maps),
+        dcf.to_spectrum(label),
+        dcf.to_spectrum(g_prev),
+        window,
+        theta,
+        settings,
+    )
+    full = _full_spectrum_training(
+        maps.astype(np.float64),
+        label.astype(np.float64),
+        g_prev.astype(np.float64),
+        window.astype(np.float64),
+        theta,
+        settings,
+    )
+    scale = np.max(np.abs(full))
+    assert np.max(np.abs(g_half - full[..., : grid[1] // 2 + 1])) < 1e-4 * scale
+    # The full spectrum is Hermitian: its other half is the conjugate mirror of the half.
+    spatial = np.fft.ifft2(full)
+    assert np.max(np.abs(spatial.imag)) < 1e-10 * np.max(np.abs(spatial.real))
