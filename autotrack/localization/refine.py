@@ -175,8 +175,8 @@ def align_template(
     if x1 - x0 < 8 or y1 - y0 < 8:
         return None
     crop = to_grey(frame[y0:y1, x0:x1])
-    shift = np.array([[1.0, 0.0, -x0], [0.0, 1.0, -y0], [0.0, 0.0, 1.0]])
-    warp = (shift @ start).astype(np.float32)
+    to_crop = about_point((0.0, 0.0), 1.0, (-x0, -y0))
+    warp = (to_crop @ start).astype(np.float32)
     warp /= warp[2, 2]
     criteria = (cv2.TERM_CRITERIA_EPS | cv2.TERM_CRITERIA_COUNT, params.iterations, params.epsilon)
     try:
@@ -185,7 +185,7 @@ def align_template(
         )
     except cv2.error:  # no convergence or a singular warp
         return None
-    return float(correlation), np.linalg.inv(shift) @ warp.astype(np.float64)
+    return float(correlation), about_point((0.0, 0.0), 1.0, (x0, y0)) @ warp.astype(np.float64)
 
 
 @dataclass
