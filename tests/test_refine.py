@@ -183,3 +183,14 @@ def test_an_rgb_frame_aligns_exactly_as_its_grey_image():
     from_grey = started_refiner().refine(to_grey(frame), {"C": box})["C"]
     assert from_rgb.refined
     assert from_rgb == from_grey
+
+
+def test_a_box_too_small_for_its_central_part_aligns_the_whole_box():
+    frame = render(placement(0.05, 0.0, (150.0, 110.0)), 0)
+    refiner = PointRefiner(RefineParams(template_fraction=0.7))
+    refiner.init(frame, {"small": (145.0, 105.0, 10.0, 10.0), "tiny": (145.0, 105.0, 7.0, 7.0)})
+    assert refiner.has_template("small")  # 7 px of central part: the whole 10 px box instead
+    assert refiner.template_of("small")[0].shape == (10, 10)
+    assert not refiner.has_template("tiny")
+    result = refiner.refine(frame, {"small": (145.0, 105.0, 10.0, 10.0)})["small"]
+    assert result.reason != "no template"
