@@ -93,6 +93,25 @@ def test_lost_landmark_is_found_where_the_pose_predicts_it(flight):
     assert w == pytest.approx(true_box[2], rel=0.1)
 
 
+def test_an_rgb_frame_is_searched_exactly_as_its_grey_image(flight):
+    # Only the search window is converted to grey: the same match as in the whole frame's grey.
+    rotations, positions, renderer = flight
+    frame0 = renderer.render(rotations[0], positions[0])[..., ::-1].copy()
+    boxes = first_boxes(rotations[0], positions[0])
+    refiner = PointRefiner()
+    refiner.init(frame0, boxes)
+    templates = {k: refiner.template_of(k) for k in boxes}
+    frame = renderer.render(rotations[21], positions[21])[..., ::-1].copy()
+    pose = pose_estimate(21, rotations[21], positions[21], ("A", "B", "D"))
+    found = {}
+    for kind, image in (("rgb", frame), ("grey", to_grey(frame))):
+        keeper = LandmarkKeeper(SCENE, ReacquireParams(lost_frames=1))
+        keeper.observe(0, frame0, pose_estimate(0, rotations[0], positions[0]), boxes, {})
+        found[kind] = keeper.observe(21, image, pose, boxes, templates)
+    assert [f.landmark_id for f in found["rgb"]] == ["C"]
+    assert found["rgb"] == found["grey"]
+
+
 def test_a_still_covered_landmark_is_not_restarted(flight):
     rotations, positions, renderer = flight
     frame0 = renderer.render(rotations[0], positions[0])[..., ::-1].copy()

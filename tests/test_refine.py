@@ -16,6 +16,7 @@ from autotrack.localization.refine import (
     about_point,
     homography_scale,
     map_point,
+    to_grey,
 )
 from autotrack.synthetic.textures import landmark_texture
 
@@ -115,3 +116,81 @@ def test_homography_helpers():
     assert map_point(h, (10.0, 20.0)) == pytest.approx((11.0, 19.0))
     assert map_point(h, (11.0, 20.0)) == pytest.approx((13.0, 19.0))
     assert homography_scale(h, (3.0, 4.0)) == pytest.approx(2.0)
+
+
+def render_on_moving_wall(homography: np.ndarray, wall_shift: tuple[float, float]) -> np.ndarray:
+    """An RGB frame: the texture warped by `homography` in front of a textured wall that is
+    shifted by `wall_shift` pixels (a wall at another depth: parallax)."""
+    rng = np.random.default_rng(7)
+    wall = cv2.resize(rng.uniform(40, 220, (60, 80, 3)).astype(np.float32), SIZE)
+    wall = cv2.warpAffine(
+        wall,
+        np.array([[1, 0, wall_shift[0]], [0, 1, wall_shift[1]]]),
+        SIZE,
+        borderMode=cv2.BORDER_REFLECT,
+    )
+    warped = cv2.warpPerspective(TEXTURE, homography, SIZE, flags=cv2.INTER_LINEAR)
+    mask = cv2.warpPerspective(np.ones(TEXTURE.shape[:2], np.float32), homography, SIZE)
+    frame = wall * (1 - mask[..., None]) + warped.astype(np.float32) * mask[..., None]
+    frame += np.random.default_rng(8).normal(0, 2.0, frame.shape)
+    return np.clip(frame, 0, 255).astype(np.uint8)[..., ::-1].copy()
+
+
+@pytest.mark.parametrize("fraction", [1.0, 0.7])
+def test_template_is_the_central_part_of_the_box(fraction):
+    first = placement(0.3, 0.0, (150.0, 110.0))
+    refiner = PointRefiner(RefineParams(template_fraction=fraction))
+    box = box_around(true_point(first), 100.0)
+    refiner.init(render_on_moving_wall(first, (0.0, 0.0)), {"C": box})
+    image, centre = refiner.template_of("C")
+    assert image.shape == (100, 100)  # re-acquisition matches the whole first box
+    assert centre == pytest.approx((50.0, 50.0))
+    later = placement(0.3, 0.0, (152.6, 108.7))
+    result = refiner.refine(render_on_moving_wall(later, (0.0, 0.0)), {"C": box})["C"]
+    assert result.refined, result.reason
+    assert math.dist(result.point, true_point(later)) < 0.1
+
+
+def test_the_wall_behind_the_landmark_is_left_out_of_the_alignment():
+    # The first box is larger than the landmark (a bounding box): its border holds wall, which
+    # moves by another amount than the landmark (parallax) and breaks the whole box's
+    # homography; the central part is the landmark alone.
+    first = placement(0.3, 0.0, (150.0, 110.0))
+    later = placement(0.3, 0.0, (152.6, 108.7))
+    results = {}
+    for fraction in (1.0, 0.7):
+        refiner = PointRefiner(RefineParams(template_fraction=fraction))
+        refiner.init(
+            render_on_moving_wall(first, (0.0, 0.0)), {"C": box_around(true_point(first), 100)}
+        )
+        moved = render_on_moving_wall(later, (5.0, 2.0))
+        results[fraction] = refiner.refine(moved, {"C": box_around(true_point(later), 100)})["C"]
+    assert results[0.7].refined and results[1.0].refined
+    assert results[1.0].correlation < 0.97 < 0.99 < results[0.7].correlation
+    assert math.dist(results[0.7].point, true_point(later)) < 0.05
+    assert math.dist(results[0.7].point, true_point(later)) < math.dist(
+        results[1.0].point, true_point(later)
+    )
+
+
+def test_an_rgb_frame_aligns_exactly_as_its_grey_image():
+    # Only the crop around the landmark is converted to grey: the same numbers as the grey of
+    # the whole frame.
+    later = placement(0.318, 3.0, (157.37, 104.62))
+    box = box_around(true_point(later), 0.318 * 256, offset=(2.4, -1.8))
+    frame = render(later, 1)
+    from_rgb = started_refiner().refine(frame, {"C": box})["C"]
+    from_grey = started_refiner().refine(to_grey(frame), {"C": box})["C"]
+    assert from_rgb.refined
+    assert from_rgb == from_grey
+
+
+def test_a_box_too_small_for_its_central_part_aligns_the_whole_box():
+    frame = render(placement(0.05, 0.0, (150.0, 110.0)), 0)
+    refiner = PointRefiner(RefineParams(template_fraction=0.7))
+    refiner.init(frame, {"small": (145.0, 105.0, 10.0, 10.0), "tiny": (145.0, 105.0, 7.0, 7.0)})
+    assert refiner.has_template("small")  # 7 px of central part: the whole 10 px box instead
+    assert refiner.template_of("small")[0].shape == (10, 10)
+    assert not refiner.has_template("tiny")
+    result = refiner.refine(frame, {"small": (145.0, 105.0, 10.0, 10.0)})["small"]
+    assert result.reason != "no template"

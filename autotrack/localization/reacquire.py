@@ -25,6 +25,7 @@ import cv2
 import numpy as np
 
 from autotrack.localization.camera import project_points
+from autotrack.localization.refine import to_grey
 from autotrack.localization.scene import Scene
 
 Box = tuple[float, float, float, float]
@@ -81,15 +82,16 @@ def box_inside(box: Box, width: int, height: int, margin: float) -> bool:
 
 
 def match_scaled_template(
-    grey: np.ndarray,
+    frame: np.ndarray,
     template: np.ndarray,
     template_centre: tuple[float, float],
     scale: float,
     predicted: tuple[float, float],
     half_window: float,
 ) -> tuple[float, tuple[float, float]] | None:
-    """Best normalised-correlation match of `template` resized by `scale` within `half_window`
-    pixels of `predicted`: (score, matched centre) or None when the window does not fit."""
+    """Best normalised-correlation match of `template` (grey float32) resized by `scale` within
+    `half_window` pixels of `predicted` in an RGB or grey frame (only the window is converted
+    to grey): (score, matched centre) or None when the window does not fit."""
     height, width = template.shape
     size = (max(int(round(width * scale)), 8), max(int(round(height * scale)), 8))
     resized = cv2.resize(template, size, interpolation=cv2.INTER_AREA)
@@ -101,10 +103,10 @@ def match_scaled_template(
     x1 = int(math.ceil(predicted[0] - cx + half_window)) + size[0]
     y1 = int(math.ceil(predicted[1] - cy + half_window)) + size[1]
     x0, y0 = max(x0, 0), max(y0, 0)
-    x1, y1 = min(x1, grey.shape[1]), min(y1, grey.shape[0])
+    x1, y1 = min(x1, frame.shape[1]), min(y1, frame.shape[0])
     if x1 - x0 < size[0] + 1 or y1 - y0 < size[1] + 1:
         return None
-    scores = cv2.matchTemplate(grey[y0:y1, x0:x1], resized, cv2.TM_CCOEFF_NORMED)
+    scores = cv2.matchTemplate(to_grey(frame[y0:y1, x0:x1]), resized, cv2.TM_CCOEFF_NORMED)
     _, best, _, (bx, by) = cv2.minMaxLoc(scores)
     return float(best), (x0 + bx + cx, y0 + by + cy)
 
@@ -169,14 +171,15 @@ class LandmarkKeeper:
     def observe(
         self,
         frame_index: int,
-        grey: np.ndarray,
+        frame: np.ndarray,
         pose,
         first_boxes: Mapping[str, Box],
         templates: Mapping[str, tuple[np.ndarray, tuple[float, float]]],
     ) -> list[Reacquisition]:
         """After a frame's solve: remember the pose, count the frames each landmark has been left
-        out, and look for those missing long enough. `first_boxes` are the landmarks' first
-        boxes, `templates` their first-frame grey appearance and centre (refine.PointRefiner)."""
+        out, and look for those missing long enough in `frame` (RGB or grey). `first_boxes` are
+        the landmarks' first boxes, `templates` their first-frame grey appearance and centre
+        (refine.PointRefiner)."""
         if not pose.valid:
             return []
         params = self.params
@@ -203,7 +206,7 @@ class LandmarkKeeper:
             scale = max(box[2] / template.shape[1], 1e-3)
             predicted = (box[0] + box[2] / 2, box[1] + box[3] / 2)
             half = max(params.search_fraction * max(box[2], box[3]), params.min_search_px)
-            match = match_scaled_template(grey, template, centre, scale, predicted, half)
+            match = match_scaled_template(frame, template, centre, scale, predicted, half)
             if match is None or match[0] < params.min_match:
                 continue
             score, (u, v) = match

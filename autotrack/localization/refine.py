@@ -54,6 +54,11 @@ class RefineParams:
     max_stale_frames: int = 5
     """After this many frames without an accepted alignment the homography is rebuilt from the
     tracker's box instead of the last accepted one."""
+    template_fraction: float = 0.7
+    """The template ECC aligns is this central fraction (of each side) of the first box. The box
+    bounds the landmark's projection, so its border holds background at another depth that does
+    not follow the landmark's homography: the centre part converges in fewer, cheaper iterations
+    and no less accurately (1.0: the whole box)."""
 
 
 @dataclass(frozen=True)
@@ -114,21 +119,35 @@ def about_point(point: tuple[float, float], scale: float, shift: tuple[float, fl
 
 
 def to_grey(frame: np.ndarray) -> np.ndarray:
-    """float32 grey image of an RGB or grey uint8 frame."""
+    """float32 grey image of an RGB or grey uint8 frame (or of a crop of one: the conversion is
+    per pixel, so a crop's grey is the same crop of the frame's grey)."""
     grey = frame if frame.ndim == 2 else cv2.cvtColor(frame, cv2.COLOR_RGB2GRAY)
     return grey.astype(np.float32)
+
+
+def pixel_region(box: Box, shape: tuple[int, ...]) -> tuple[int, int, int, int] | None:
+    """Whole-pixel region (x0, y0, x1, y1) of an (x, y, w, h) box clipped to an image of `shape`;
+    None when smaller than 8 x 8 pixels."""
+    x, y, w, h = box
+    x0, y0 = max(int(round(x)), 0), max(int(round(y)), 0)
+    x1, y1 = min(int(round(x + w)), shape[1]), min(int(round(y + h)), shape[0])
+    return (x0, y0, x1, y1) if x1 - x0 >= 8 and y1 - y0 >= 8 else None
 
 
 @dataclass
 class _Template:
     image: np.ndarray
-    """First-frame grey patch (float32)."""
+    """First-frame grey patch of the whole first box (float32; re-acquisition matches it)."""
     centre: tuple[float, float]
-    """The landmark's point in template coordinates (the first box's centre)."""
+    """The landmark's point in `image` coordinates (the first box's centre)."""
+    aligned: np.ndarray
+    """The part of `image` ECC aligns (`RefineParams.template_fraction`)."""
+    aligned_centre: tuple[float, float]
+    """The landmark's point in `aligned` coordinates."""
     size: float
     """Larger side of the first box (pixels)."""
     homography: np.ndarray
-    """Last accepted template -> image homography."""
+    """Last accepted `aligned` -> image homography."""
     last_box: Box
     """The tracker's box of the frame the homography was accepted on."""
     stale: int = 0
@@ -137,12 +156,13 @@ class _Template:
 
 def align_template(
     template: np.ndarray,
-    frame_grey: np.ndarray,
+    frame: np.ndarray,
     start: np.ndarray,
     params: RefineParams,
 ) -> tuple[float, np.ndarray] | None:
-    """ECC homography template -> frame from `start`, aligned inside a crop around the predicted
-    region. Returns (correlation, homography in frame coordinates) or None if ECC fails."""
+    """ECC homography template -> frame (RGB or grey) from `start`, aligned inside a crop around
+    the predicted region (only the crop is converted to grey). Returns (correlation, homography
+    in frame coordinates) or None if ECC fails."""
     height, width = template.shape
     corners = np.array([[0, 0], [width - 1, 0], [width - 1, height - 1], [0, height - 1]], float)
     projected = cv2.perspectiveTransform(corners.reshape(-1, 1, 2), start).reshape(-1, 2)
@@ -150,13 +170,13 @@ def align_template(
     margin = params.search_margin * span + 4.0
     x0 = max(int(math.floor(projected[:, 0].min() - margin)), 0)
     y0 = max(int(math.floor(projected[:, 1].min() - margin)), 0)
-    x1 = min(int(math.ceil(projected[:, 0].max() + margin)) + 1, frame_grey.shape[1])
-    y1 = min(int(math.ceil(projected[:, 1].max() + margin)) + 1, frame_grey.shape[0])
+    x1 = min(int(math.ceil(projected[:, 0].max() + margin)) + 1, frame.shape[1])
+    y1 = min(int(math.ceil(projected[:, 1].max() + margin)) + 1, frame.shape[0])
     if x1 - x0 < 8 or y1 - y0 < 8:
         return None
-    crop = frame_grey[y0:y1, x0:x1]
-    shift = np.array([[1.0, 0.0, -x0], [0.0, 1.0, -y0], [0.0, 0.0, 1.0]])
-    warp = (shift @ start).astype(np.float32)
+    crop = to_grey(frame[y0:y1, x0:x1])
+    to_crop = about_point((0.0, 0.0), 1.0, (-x0, -y0))
+    warp = (to_crop @ start).astype(np.float32)
     warp /= warp[2, 2]
     criteria = (cv2.TERM_CRITERIA_EPS | cv2.TERM_CRITERIA_COUNT, params.iterations, params.epsilon)
     try:
@@ -165,7 +185,7 @@ def align_template(
         )
     except cv2.error:  # no convergence or a singular warp
         return None
-    return float(correlation), np.linalg.inv(shift) @ warp.astype(np.float64)
+    return float(correlation), about_point((0.0, 0.0), 1.0, (x0, y0)) @ warp.astype(np.float64)
 
 
 @dataclass
@@ -177,26 +197,30 @@ class PointRefiner:
 
     def init(self, frame: np.ndarray, boxes: Mapping[str, Box]) -> dict[str, RefinedPoint]:
         """Store each landmark's first-frame appearance; returns the box centres."""
-        grey = to_grey(frame)
-        return {k: self.set_template(k, grey, box) for k, box in boxes.items()}
+        return {k: self.set_template(k, frame, box) for k, box in boxes.items()}
 
-    def set_template(self, landmark_id: str, grey: np.ndarray, box: Box) -> RefinedPoint:
-        """(Re)take a landmark's template from `box` of a grey float32 frame."""
-        x, y, w, h = box
-        x0, y0 = max(int(round(x)), 0), max(int(round(y)), 0)
-        x1 = min(int(round(x + w)), grey.shape[1])
-        y1 = min(int(round(y + h)), grey.shape[0])
+    def set_template(self, landmark_id: str, frame: np.ndarray, box: Box) -> RefinedPoint:
+        """(Re)take a landmark's template from `box` of an RGB or grey frame."""
         centre = box_centre(box)
-        if x1 - x0 >= 8 and y1 - y0 >= 8:
-            self._templates[landmark_id] = _Template(
-                image=grey[y0:y1, x0:x1].copy(),
-                centre=(centre[0] - x0, centre[1] - y0),
-                size=float(max(w, h)),
-                homography=np.array([[1.0, 0.0, x0], [0.0, 1.0, y0], [0.0, 0.0, 1.0]]),
-                last_box=tuple(box),
-            )
-        else:
+        whole = pixel_region(box, frame.shape)
+        if whole is None:
             self._templates.pop(landmark_id, None)
+            return RefinedPoint(centre, False, math.nan, math.nan, "first frame")
+        x, y, w, h = box
+        fraction = self.params.template_fraction
+        inner = (x + w * (1 - fraction) / 2, y + h * (1 - fraction) / 2, w * fraction, h * fraction)
+        x0, y0, x1, y1 = whole
+        ax0, ay0, ax1, ay1 = pixel_region(inner, frame.shape) or whole
+        image = to_grey(frame[y0:y1, x0:x1])
+        self._templates[landmark_id] = _Template(
+            image=image,
+            centre=(centre[0] - x0, centre[1] - y0),
+            aligned=image[ay0 - y0 : ay1 - y0, ax0 - x0 : ax1 - x0].copy(),
+            aligned_centre=(centre[0] - ax0, centre[1] - ay0),
+            size=float(max(w, h)),
+            homography=np.array([[1.0, 0.0, ax0], [0.0, 1.0, ay0], [0.0, 0.0, 1.0]]),
+            last_box=tuple(box),
+        )
         return RefinedPoint(centre, False, math.nan, math.nan, "first frame")
 
     def has_template(self, landmark_id: str) -> bool:
@@ -217,11 +241,10 @@ class PointRefiner:
 
     def refine(self, frame: np.ndarray, boxes: Mapping[str, Box]) -> dict[str, RefinedPoint]:
         """Refined (or fallback) points of the landmarks whose tracked boxes are given."""
-        grey = to_grey(frame)
-        return {k: self.refine_one(grey, k, box) for k, box in boxes.items()}
+        return {k: self.refine_one(frame, k, box) for k, box in boxes.items()}
 
-    def refine_one(self, grey: np.ndarray, landmark_id: str, box: Box) -> RefinedPoint:
-        """One landmark: align its template near the tracked `box` of the grey float32 frame."""
+    def refine_one(self, frame: np.ndarray, landmark_id: str, box: Box) -> RefinedPoint:
+        """One landmark: align its template near the tracked `box` of an RGB or grey frame."""
         params = self.params
         centre = box_centre(box)
         if not all(math.isfinite(v) for v in box):
@@ -230,15 +253,15 @@ class PointRefiner:
         if template is None:
             return RefinedPoint(centre, False, math.nan, math.nan, "no template")
         start = self._start(template, box)
-        aligned = align_template(template.image, grey, start, params)
+        aligned = align_template(template.aligned, frame, start, params)
         template.stale += 1
         if aligned is None:
             return RefinedPoint(centre, False, math.nan, math.nan, "alignment failed")
         correlation, homography = aligned
-        point = map_point(homography, template.centre)
+        point = map_point(homography, template.aligned_centre)
         offset = math.dist(point, centre)
         box_scale = max(box[2], box[3]) / template.size
-        scale_ratio = homography_scale(homography, template.centre) / box_scale
+        scale_ratio = homography_scale(homography, template.aligned_centre) / box_scale
         limit = max(params.max_offset_fraction * max(box[2], box[3]), params.min_offset_px)
         reason = ""
         if not correlation >= params.min_correlation:
@@ -260,7 +283,7 @@ class PointRefiner:
         centre = box_centre(box)
         if template.stale > self.params.max_stale_frames:
             scale = max(box[2], box[3]) / template.size
-            cx, cy = template.centre
+            cx, cy = template.aligned_centre
             return np.array(
                 [
                     [scale, 0.0, centre[0] - scale * cx],
@@ -271,7 +294,7 @@ class PointRefiner:
         previous = template.last_box
         before = box_centre(previous)
         scale = max(box[2], box[3]) / max(previous[2], previous[3])
-        point = map_point(template.homography, template.centre)
+        point = map_point(template.homography, template.aligned_centre)
         motion = (centre[0] - before[0], centre[1] - before[1])
         return about_point(point, scale, motion) @ template.homography
 

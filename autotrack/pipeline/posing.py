@@ -25,7 +25,6 @@ from autotrack.localization.refine import (
     RefinedPoint,
     RefineParams,
     fallback_weights,
-    to_grey,
 )
 from autotrack.localization.scene import Scene
 from autotrack.result import PoseEstimate, TrackResult
@@ -113,10 +112,9 @@ class PoseStage:
         centres are their points here; their later points are dropped."""
         if self._refiner is None:
             return
-        grey = to_grey(frame)
         for target_id, box in boxes.items():
             self.drop_points(target_id, frame_index)
-            point = self._refiner.set_template(target_id, grey, box)
+            point = self._refiner.set_template(target_id, frame, box)
             self._points.setdefault(target_id, {})[frame_index] = point
             self._template_boxes[target_id] = tuple(box)
             landmark = landmarks.get(target_id)
@@ -127,9 +125,8 @@ class PoseStage:
         """Refined points of the targets tracked onto this frame (`boxes`: their boxes)."""
         if self._refiner is None or not boxes:
             return
-        grey = to_grey(frame)
         for target_id, box in boxes.items():
-            point = self._refiner.refine_one(grey, target_id, box)
+            point = self._refiner.refine_one(frame, target_id, box)
             self._points.setdefault(target_id, {})[frame_index] = point
 
     def drop_points(self, target_id: str, first: int) -> None:
@@ -226,7 +223,7 @@ class PoseStage:
                 if entry.tracker_at_frame:
                     templates[landmark_id] = self._refiner.template_of(entry.target_id)
         restarts = []
-        found = self._keeper.observe(frame_index, to_grey(frame), pose, first_boxes, templates)
+        found = self._keeper.observe(frame_index, frame, pose, first_boxes, templates)
         for again in found:
             entry = targets[again.landmark_id]
             self._refiner.restart(entry.target_id)
