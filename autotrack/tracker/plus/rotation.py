@@ -49,34 +49,14 @@ def _warp(source: np.ndarray, matrix: np.ndarray, size_hw: tuple[int, int]) -> n
     )
 
 
-def turned_margin(size_hw: tuple[int, int], angles_deg: tuple[float, ...] | None) -> int:
-    """Pixels around a (rows, cols) patch that hold its corners turned by any of `angles_deg`
-    (the bound of the turned rectangle); any angle when None (half the diagonal's excess over
-    the shorter side: (sqrt 2 - 1) / 2 of a square's side)."""
-    rows, cols = size_hw
-    if angles_deg is None:
-        return math.ceil((math.hypot(rows, cols) - min(rows, cols)) / 2.0)
-    margin = 0
-    for angle in angles_deg:
-        cos, sin = abs(math.cos(math.radians(angle))), abs(math.sin(math.radians(angle)))
-        height, width = rows * cos + cols * sin, cols * cos + rows * sin
-        margin = max(margin, math.ceil(max(height - rows, width - cols) / 2.0))
-    return margin
-
-
 class TurnedSampler:
-    """`sampling.search_patch` of one frame's search region in the frame turned by any angle,
-    with one area resampling per frame whatever the angles asked for.
+    """`sampling.search_patch` of one frame's search region in the frame turned by any angle.
 
-    - Until a turned patch is asked for, the patch at angle 0 is `search_patch` itself, and a
-      turned patch is that patch turned at its own resolution: the detection's patch is shared
-      by the trial angles (autotrack+'s usual frame: an upright target whose peak dropped). The
-      turned patch's corners that fall outside the region repeat its border; they are where
-      the cosine window on the features is nearly 0 (below 0.01 for turns up to 10 degrees).
-    - Once a turned patch is asked for before any at angle 0 (the target is turned), the
-      region is resampled once with a margin that covers its turned corners (area averaging,
-      as the release) and every angle, 0 too, is turned from it at the patch's resolution.
-      `angles_deg`, the angles that may be asked for, sizes the margin (`turned_margin`).
+    The search region is resampled once (area averaging, as the release) with a margin that
+    covers its turned corners, on the first turned patch asked for, then turned at the patch's
+    resolution per angle: one area resampling of ~2x the output's area per frame, shared by the
+    current angle's patch and the trial angles', and one small warp per angle, instead of a
+    warp at the image's resolution. The patch at angle 0 is `search_patch` itself.
     """
 
     def __init__(
@@ -86,40 +66,30 @@ class TurnedSampler:
         region_size_hw: tuple[int, int],
         output_size_hw: tuple[int, int],
         sample=search_patch,
-        angles_deg: tuple[float, ...] | None = None,
     ) -> None:
         self.image, self.position = image, position
         self.search_patch = sample  # `sampling.search_patch` or a backend's (the same pixels)
         self.region_size_hw = region_size_hw
         self.rows, self.cols = int(output_size_hw[0]), int(output_size_hw[1])
-        margin = turned_margin((self.rows, self.cols), angles_deg)
+        margin = math.ceil(max(self.rows, self.cols) * (math.sqrt(2.0) - 1.0) / 2.0)
         self.big_hw = (self.rows + 2 * margin, self.cols + 2 * margin)
         self.big: np.ndarray | None = None
-        self.upright: np.ndarray | None = None  # the patch at angle 0, when sampled first
 
     def patch(self, angle_deg: float) -> np.ndarray:
         """The search patch in the frame turned by `angle_deg`."""
-        output = (self.rows, self.cols)
-        if self.big is None and self.upright is None and angle_deg == 0.0:
-            self.upright = self.search_patch(self.image, self.position, self.region_size_hw, output)
-        if self.upright is not None:
-            if angle_deg == 0.0:
-                return self.upright
-            return _warp(self.upright, self._turn(angle_deg, output), output)
+        if angle_deg == 0.0:
+            output = (self.rows, self.cols)
+            return self.search_patch(self.image, self.position, self.region_size_hw, output)
         big_hw = self.big_hw
         if self.big is None:
             factor = (big_hw[0] / self.rows, big_hw[1] / self.cols)
             region = self.region_size_hw
             bigger = (round(region[0] * factor[0]), round(region[1] * factor[1]))
             self.big = self.search_patch(self.image, self.position, bigger, big_hw)
-        return _warp(self.big, self._turn(angle_deg, big_hw), output)
-
-    def _turn(self, angle_deg: float, source_hw: tuple[int, int]) -> np.ndarray:
-        """The inverse map of a turn by `angle_deg` about the centres of a `source_hw` sample
-        and of the output patch."""
-        source_centre = ((source_hw[1] - 1) / 2.0, (source_hw[0] - 1) / 2.0)
+        source_centre = ((big_hw[1] - 1) / 2.0, (big_hw[0] - 1) / 2.0)
         output_centre = ((self.cols - 1) / 2.0, (self.rows - 1) / 2.0)
-        return _inverse_map(angle_deg, source_centre, output_centre)
+        matrix = _inverse_map(angle_deg, source_centre, output_centre)
+        return _warp(self.big, matrix, (self.rows, self.cols))
 
 
 def rotated_search_patches(

@@ -252,7 +252,7 @@ class AutoTrackPlus(AutoTrack, beyond_release=True):
             return image, self.position
         steps = self.scale_filter.scale_steps[0] ** 2
         largest = np.max(self.scale_filter.base_target_size_hw) * self.scale * steps
-        side = int(math.ceil(largest)) + 2
+        side = int(math.ceil(largest * math.sqrt(2.0))) + 2
         return rotation.upright_view(image, self.position, self.angle, side)
 
     def _sampler(self, image: np.ndarray) -> rotation.TurnedSampler:
@@ -260,9 +260,9 @@ class AutoTrackPlus(AutoTrack, beyond_release=True):
         rows, cols = self._search_region()
         output = (int(self.window_size[0]), int(self.window_size[1]))
         region = (int(rows), int(cols))
-        angles = rotation.candidate_angles(self.angle, self.params.rotation_step)
-        sample = self.backend.search_patch
-        return rotation.TurnedSampler(image, self.position, region, output, sample, angles)
+        return rotation.TurnedSampler(
+            image, self.position, region, output, self.backend.search_patch
+        )
 
     def _features_spectrum(self, image: np.ndarray) -> np.ndarray:
         patch = self._sampler(image).patch(self.angle)
