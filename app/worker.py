@@ -93,7 +93,12 @@ class Worker:
                 command = self._commands.get(timeout=wait)
             except queue.Empty:
                 started = time.monotonic()
+                with self._idle:  # a step is idle only once its panels are shown too
+                    self._pending += 1
                 self._guarded(self._play_step, self._after_step)
+                with self._idle:
+                    self._pending -= 1
+                    self._idle.notify_all()
                 next_step = started + self._frame_period()
                 continue
             if command is None:

@@ -9,6 +9,8 @@ import json
 import shutil
 import subprocess
 import sys
+import threading
+import time
 import zipfile
 from pathlib import Path
 from types import SimpleNamespace
@@ -569,7 +571,7 @@ class _Playback:
         self.playing = False
 
 
-def _worker(playback: _Playback):
+def _worker(playback: _Playback, after_step=lambda: None):  # noqa: ANN001
     from autotrack_studio.worker import Worker
 
     def after_command() -> None:
@@ -580,7 +582,7 @@ def _worker(playback: _Playback):
         play_step=playback.play_step,
         frame_period=lambda: 0.0,
         after_command=after_command,
-        after_step=lambda: None,
+        after_step=after_step,
         report=playback.reports.append,
         stop_playing=playback.stop,
         name="test-worker",
@@ -598,6 +600,32 @@ def test_worker_runs_commands_in_order_then_plays_until_stopped() -> None:
         assert worker.wait_idle(timeout=120.0)
         assert order == [0, 1, 2] and playback.steps == 5 and playback.after_commands == 4
     finally:
+        worker.close()
+
+
+def test_the_worker_is_idle_only_after_the_last_steps_panels_are_shown() -> None:
+    """Playback that ends by itself shows its last frame in the step's `after_step` (the tab's
+    `_step_done`): waiting for the worker to be idle waits for that too, however late it runs
+    (CI saw the Frame slider read a few frames short on a busy machine)."""
+    playback = _Playback(stop_after=3)
+    release, shown = threading.Event(), []
+
+    def after_step() -> None:
+        if not playback.playing:  # the last step: its panels take their time
+            release.wait(timeout=120.0)
+            shown.append(playback.steps)
+
+    worker = _worker(playback, after_step)
+    try:
+        worker.submit(setattr, playback, "playing", True)
+        deadline = time.monotonic() + 120.0
+        while playback.steps < 3 and time.monotonic() < deadline:
+            time.sleep(0.01)
+        assert not worker.wait_idle(timeout=0.3)  # the last step's panels are not shown yet
+        release.set()
+        assert worker.wait_idle(timeout=120.0) and shown == [3]
+    finally:
+        release.set()
         worker.close()
 
 
