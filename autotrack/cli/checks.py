@@ -11,6 +11,7 @@ import argparse
 import math
 import os
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -18,6 +19,9 @@ from autotrack.errors import BoxError, InputError
 from autotrack.hybrid.factory import SIAMESE_TRACKERS, TRACKERS, make_tracker, tracker_params
 from autotrack.params import TrackerParams
 from autotrack.tracker.inputs import validate_box
+
+if TYPE_CHECKING:
+    from autotrack.pipeline import Recording
 
 
 def _nearest_existing(path: Path) -> Path:
@@ -43,6 +47,21 @@ def add_session_arguments(parser: argparse.ArgumentParser) -> None:
         action="store_true",
         help="with --session: do not embed the tracked frames (a much smaller file that "
         "replays without its footage)",
+    )
+
+
+def session_recording(args: argparse.Namespace, scene_path: Path | None = None) -> Recording | None:
+    """The recording `--session` asks for (None without it): the tracked frames embedded unless
+    `--no-frames`."""
+    if args.session is None:
+        return None
+    from autotrack.pipeline import Recording
+
+    return Recording(
+        source=str(args.sequence),
+        path=args.session,
+        scene_path=scene_path,
+        embed_frames=not args.no_frames,
     )
 
 

@@ -13,7 +13,7 @@ from typing import Any
 import numpy as np
 from tqdm import tqdm
 
-from autotrack.cli.checks import init_box
+from autotrack.cli.checks import init_box, session_recording
 from autotrack.errors import BoxError, InputError
 
 
@@ -91,21 +91,6 @@ def run_track_live(args: argparse.Namespace, tracker: str, params: Any) -> int:
     return 0
 
 
-def _live_recording(args: argparse.Namespace, scene_path: Path) -> Any:
-    """The --session recording of a live run: the processed frames are embedded (JPEG, unless
-    --no-frames), since a live source cannot be replayed."""
-    if args.session is None:
-        return None
-    from autotrack.pipeline import Recording
-
-    return Recording(
-        source=str(args.sequence),
-        path=args.session,
-        scene_path=scene_path,
-        embed_frames=not args.no_frames,
-    )
-
-
 def _pose_options(args: argparse.Namespace) -> dict[str, Any]:
     """The pipeline's refinement and re-acquisition settings from `--no-refine` and
     `--no-reacquire`."""
@@ -151,7 +136,7 @@ def run_localize_live(
             tracker=tracker,
             scene=scene,
             localizer_params=localizer_params,
-            recording=_live_recording(args, scene_path),
+            recording=session_recording(args, scene_path),
             fps=reader.fps or DEFAULT_FPS,
             threads=args.threads,
             tracker_processes=args.processes,

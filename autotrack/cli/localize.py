@@ -6,7 +6,6 @@ import argparse
 import sys
 from dataclasses import replace
 from pathlib import Path
-from typing import TYPE_CHECKING
 
 import numpy as np
 from tqdm import tqdm
@@ -18,6 +17,7 @@ from autotrack.cli.checks import (
     check_session_file,
     chosen_tracker,
     finite,
+    session_recording,
 )
 from autotrack.cli.live import add_live_arguments, check_source, run_localize_live
 from autotrack.cli.reports import DEFAULT_FPS, smoothed_report, summarise
@@ -26,9 +26,6 @@ from autotrack.errors import InputError
 from autotrack.io.boxes_json import read_boxes_json
 from autotrack.io.live import source_argument
 from autotrack.localization.scene import load_scene, scene_warnings
-
-if TYPE_CHECKING:
-    from autotrack.pipeline import Recording
 
 
 def add_parser(subparsers: argparse._SubParsersAction) -> None:
@@ -183,20 +180,6 @@ def _choose_concurrency(args: argparse.Namespace, target_count: int) -> None:
     args.threads, args.processes = chosen_concurrency(args.threads, args.processes, target_count)
 
 
-def _recording(args: argparse.Namespace, scene_path: Path) -> Recording | None:
-    """The session `--session` asks for (None without it)."""
-    from autotrack.pipeline import Recording
-
-    if args.session is None:
-        return None
-    return Recording(
-        source=str(args.sequence),
-        path=args.session,
-        scene_path=scene_path,
-        embed_frames=not args.no_frames,
-    )
-
-
 def run_localize(args: argparse.Namespace) -> int:
     clock = StartupClock()
     from autotrack.io.frames import open_frames
@@ -237,7 +220,7 @@ def run_localize(args: argparse.Namespace) -> int:
     if fps <= 0:
         raise InputError("--fps must be positive")
     smoother = SmootherParams(fps=fps, lag_frames=args.smooth_lag) if args.smoothed else None
-    recording = _recording(args, scene_path)
+    recording = session_recording(args, scene_path)
     records = OutcomeLog(scene.landmark_ids)
     progress = tqdm(total=len(frames), unit="frame", desc=frames.name, disable=args.quiet)
     with frames, progress:

@@ -16,6 +16,7 @@ from autotrack.cli.checks import (
     check_session_file,
     chosen_tracker,
     init_box,
+    session_recording,
 )
 from autotrack.cli.live import add_live_arguments, check_source, run_track_live
 from autotrack.cli.timing import STARTUP_FRAMES, StartupClock
@@ -76,7 +77,7 @@ def _ground_truth(sequence: Path) -> np.ndarray | None:
 
 def run(args: argparse.Namespace) -> int:
     clock = StartupClock()
-    from autotrack.pipeline import Pipeline, Recording
+    from autotrack.pipeline import Pipeline
 
     check_output_file(args.out, "--out", force=args.force)
     check_session_file(args.session)
@@ -102,11 +103,7 @@ def run(args: argparse.Namespace) -> int:
     progress = tqdm(
         total=len(frames), unit="frame", desc=frames.name, disable=args.quiet or len(frames) < 50
     )
-    recording = None
-    if args.session is not None:
-        recording = Recording(
-            source=str(args.sequence), path=args.session, embed_frames=not args.no_frames
-        )
+    recording = session_recording(args)
     with (
         frames,
         progress,
