@@ -35,6 +35,7 @@ from hybrid_ablation import (
     NANOTRACK,
     PLUS,
     build_hybrid_table,
+    halved_doubled_cells,
     hybrid_summary,
     hybrid_variants,
     mean_scores,
@@ -353,14 +354,7 @@ def _sensitivity_lines(results: dict, scores: dict, names: list[str]) -> list[st
             if base not in scores:
                 continue
             base_p, base_a = mean_scores(scores[base], names)
-            cells = []
-            for factor in (0.5, 2.0):
-                label = f"{PLUS} {name} x{factor:g}"
-                if label not in scores:
-                    cells.append("not run")
-                    continue
-                p, a = mean_scores(scores[label], names)
-                cells.append(f"{p:.3f} / {a:.3f} ({p - base_p:+.3f} / {a - base_a:+.3f})")
+            cells = halved_doubled_cells(scores, names, PLUS, name, (base_p, base_a))
             lines.append(
                 f"| {base} | `{name}` | {value:g} | {base_p:.3f} / {base_a:.3f} | "
                 + " | ".join(cells)

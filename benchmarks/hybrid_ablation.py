@@ -63,6 +63,22 @@ def mean_scores(scores: dict, names) -> tuple[float, float]:
     )
 
 
+def halved_doubled_cells(
+    scores: dict, names, tracker: str, parameter: str, base: tuple[float, float]
+) -> list[str]:
+    """The sensitivity table's two cells of one parameter of `tracker` ('{tracker} {parameter}
+    x0.5' and 'x2' labels): mean P@20 / AUC and their change from `base`, or 'not run'."""
+    cells = []
+    for factor in (0.5, 2.0):
+        label = f"{tracker} {parameter} x{factor:g}"
+        if label not in scores:
+            cells.append("not run")
+            continue
+        p, a = mean_scores(scores[label], names)
+        cells.append(f"{p:.3f} / {a:.3f} ({p - base[0]:+.3f} / {a - base[1]:+.3f})")
+    return cells
+
+
 def _hybrid_row(label: str, scores: dict, names: list[str], fps: dict) -> str:
     p, a = mean_scores(scores[label], names)
     nano = scores[NANOTRACK]
@@ -119,14 +135,7 @@ def build_hybrid_table(sequences, scores: dict, fps: dict) -> str:
             "|---|---|---|",
         ]
         for name in HYBRID_SENSITIVE:
-            cells = []
-            for factor in (0.5, 2.0):
-                label = f"{HYBRID} {name} x{factor:g}"
-                if label not in scores:
-                    cells.append("not run")
-                    continue
-                p, a = mean_scores(scores[label], names)
-                cells.append(f"{p:.3f} / {a:.3f} ({p - base_p:+.3f} / {a - base_a:+.3f})")
+            cells = halved_doubled_cells(scores, names, HYBRID, name, (base_p, base_a))
             lines.append(f"| `{name}` | " + " | ".join(cells) + " |")
     return "\n".join(lines)
 
