@@ -34,3 +34,14 @@ def shared_sequence_dir(dataset: str, name: str) -> Path:
     if not folder.is_dir():
         pytest.skip(f"sequence {dataset}/{name} not found under {SEQUENCES}")
     return folder
+
+
+@pytest.fixture
+def missing_models(monkeypatch, tmp_path) -> Path:
+    """NanoTrack's default model files point to a file that is not there (a broken install)."""
+    from autotrack.nanotrack.tracker import NanoTrackParams
+
+    missing = tmp_path / "gone" / "nanotrack_backbone_sim.onnx"
+    defaults = NanoTrackParams.__init__.__defaults__
+    monkeypatch.setattr(NanoTrackParams.__init__, "__defaults__", (missing, *defaults[1:]))
+    return missing

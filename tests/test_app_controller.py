@@ -957,13 +957,9 @@ def test_nanotrack_and_hybrid_chosen_in_the_app_track_show_their_maps_and_are_re
 
 
 def test_a_tracker_whose_models_cannot_load_is_refused_in_one_line(
-    tmp_path: Path, monkeypatch
+    tmp_path: Path, missing_models: Path
 ) -> None:
-    from autotrack.nanotrack.tracker import NanoTrackParams
-
-    missing = tmp_path / "gone" / "nanotrack_backbone_sim.onnx"
-    defaults = NanoTrackParams.__init__.__defaults__
-    monkeypatch.setattr(NanoTrackParams.__init__, "__defaults__", (missing, *defaults[1:]))
+    missing = missing_models
     controller = _truth_controller(tmp_path, 3)
     try:
         for name in ("nanotrack", "hybrid"):

@@ -199,17 +199,6 @@ def test_sweep_refuses_nanotrack_and_sweeps_the_hybrids_filter(gull, tmp_path, c
         run_sweep([sequence], plain, tmp_path / "hybrid", progress=False)
 
 
-@pytest.fixture
-def missing_models(monkeypatch, tmp_path) -> Path:
-    """NanoTrack's default model files point to a file that is not there (a broken install)."""
-    from autotrack.nanotrack.tracker import NanoTrackParams
-
-    missing = tmp_path / "gone" / "nanotrack_backbone_sim.onnx"
-    defaults = NanoTrackParams.__init__.__defaults__
-    monkeypatch.setattr(NanoTrackParams.__init__, "__defaults__", (missing, *defaults[1:]))
-    return missing
-
-
 @pytest.mark.parametrize("tracker", ["nanotrack", "hybrid"])
 def test_unloadable_models_end_the_commands_in_one_line(
     gull, demo_window, missing_models, tracker, tmp_path, capsys
