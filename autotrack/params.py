@@ -152,6 +152,15 @@ class TrackerParams:
     memory cannot tell apart (walkers dressed alike) differ by up to ~10 % in its response
     from frame to frame on the generated walker group; a distractor of another pattern that
     dragged the track off (the passing look-alike of tests/sequences.py) by ~50 %."""
+    lookalike_reach: float = 0.0
+    """The scale may not grow while a look-alike (another distinct peak of the response, at
+    least `distractor_ratio` of the highest) lies within this many grown box sizes of the
+    target on both axes (memory.lookalike_within): a larger scale sample then takes in the
+    neighbour, whose appearance is the target's, and the scale filter prefers it by a fraction
+    of a percent a step, which ran a walker's box away to twice its size in a crowd
+    (docs/tracker.md). 0 = the release's scale model. 0.5 in `autotrack+`: the look-alike's
+    centre inside the grown box (1.0, the look-alike's box overlapping it, holds the scale of a
+    large target whose own parts give second peaks: MotorRolling 0.52 -> 0.33 AUC)."""
     distractor_ratio: float = 0.5
     """A second local maximum of the response at least this fraction of the first counts as a
     distractor (memory.distinct_peaks). 0.5: half the target's own peak, the level above which
@@ -199,8 +208,8 @@ class TrackerParams:
             problems.append("num_scales must be >= 1 and scale_step > 1")
         if not 0 < self.variation_floor <= 1 or not 0 < self.confidence_memory <= 1:
             problems.append("variation_floor and confidence_memory must be in (0, 1]")
-        if self.memory_margin < 0:
-            problems.append("memory_margin must be >= 0")
+        if self.memory_margin < 0 or self.lookalike_reach < 0:
+            problems.append("memory_margin and lookalike_reach must be >= 0")
         if not 0 <= self.memory_rate <= 1 or not 0 < self.distractor_ratio <= 1:
             problems.append("memory_rate must be in [0, 1] and distractor_ratio in (0, 1]")
         if self.num_aspects < 0 or self.velocity_weight < 0:
@@ -255,6 +264,7 @@ class TrackerParams:
             or self.memory_rate
             or self.motion_prior
             or self.rotation_step
+            or self.lookalike_reach
         )
 
     def with_colour_table(self, path: str | Path | None) -> TrackerParams:
@@ -278,6 +288,7 @@ PRESETS: dict[str, TrackerParams] = {
         scale_model_min_side=16.0,
         memory_rate=0.01,
         rotation_step=10.0,
+        lookalike_reach=0.5,
     ),
 }
 """The paper's ablation (Table 2): STRCF baseline, +ASR, +ATR, the full AutoTrack (the authors'

@@ -90,6 +90,7 @@ SENSITIVE = (
     "rotation_margin",
     "redetect_patience",
     "memory_margin",
+    "lookalike_reach",
 )
 """The parameters `autotrack+` uses or adds (delta is the release's, but it acts only here)."""
 

@@ -4,7 +4,8 @@ mechanism acts only when its own evidence says the target is lost or changing.
 Each scene reproduces a pattern seen on unseen UAV sequences where `autotrack+` did worse than
 the faithful preset; before the fixes every test below failed (AUC on the two seeds' mean:
 road 0.49 against the faithful 0.80, walkers 0.42 against 0.73, tiny car 0.42 against 0.75;
-one-frame jumps of 38-64 px onto another car, a tiny car's box reshaped to 0.65 of its aspect).
+one-frame jumps of 38-64 px onto another car, a tiny car's box reshaped to 0.65 of its aspect;
+in the walker crowd, seeds 5-6, 0.68 against 0.76, the box grown to 1.8-2.2x the target).
 """
 
 from __future__ import annotations
@@ -19,8 +20,13 @@ from autotrack.errors import InputError
 from autotrack.evaluation.metrics import center_errors, score_sequence
 from autotrack.params import TrackerParams
 from autotrack.synthetic.aerial import SCENES, aerial_scene, render_aerial
+from autotrack.tracker.plus.memory import lookalike_within
 
 SEEDS = (1, 2)
+CROWD_SEEDS = (5, 6)
+"""The walker crowd's seeds: on seeds 1-4 the pattern does not show (seeds 1, 3: the box stays
+within 1.31x for both presets) or is not the one fixed here (seeds 2, 4: the neighbour merges with
+the target into one peak and the box grows regardless; docs/tracker.md)."""
 
 
 def _track(params: TrackerParams, sequence) -> np.ndarray:
@@ -41,7 +47,7 @@ def _jumps(boxes: np.ndarray, truth: np.ndarray) -> np.ndarray:
 def scene_runs(request):
     """(scene name, [(sequence, faithful boxes, autotrack+ boxes) per seed])."""
     runs = []
-    for seed in SEEDS:
+    for seed in CROWD_SEEDS if request.param == "walker_crowd" else SEEDS:
         sequence = render_aerial(aerial_scene(request.param, seed))
         runs.append(
             (
@@ -80,6 +86,34 @@ def test_plus_keeps_the_box_size_and_shape_of_the_target(scene_runs):
         aspect = (plus[:, 2] / plus[:, 3]) / (sequence.boxes[:, 2] / sequence.boxes[:, 3])
         assert np.all((area > 1 / 1.5) & (area < 1.5)), name
         assert np.all((aspect > 0.8) & (aspect < 1.25)), name
+
+
+def _area_ratios(boxes: np.ndarray, truth: np.ndarray) -> np.ndarray:
+    return boxes[:, 2] * boxes[:, 3] / (truth[:, 2] * truth[:, 3])
+
+
+def test_the_scale_does_not_grow_over_a_lookalike_in_a_crowd():
+    # A walker entering a crowd, one walker passing over it: without the guard the box of
+    # `autotrack+` grows to ~2x the target and stays there; the faithful preset's stays < 1.5x.
+    sequence = render_aerial(aerial_scene("walker_crowd", 6))
+    plus = preset("autotrack+")
+    faithful = _area_ratios(_track(preset("autotrack"), sequence), sequence.boxes)
+    unguarded = _area_ratios(_track(replace(plus, lookalike_reach=0.0), sequence), sequence.boxes)
+    guarded = _area_ratios(_track(plus, sequence), sequence.boxes)
+    assert faithful.max() < 1.5
+    assert unguarded.max() > 1.8 and np.median(unguarded[-20:]) > 1.6
+    assert guarded.max() < 1.3 and np.median(guarded[-20:]) < 1.2
+
+
+def test_a_lookalike_counts_within_the_reach_on_both_axes_and_not_the_target_itself():
+    shape = (40, 40)
+    target = (0.4, -0.3)  # the target's peak (0, 0), refined
+    reach = np.array([6.0, 2.5])  # (rows, cols) in cells
+    assert not lookalike_within([(0, 0)], target, shape, reach)  # the target alone
+    assert lookalike_within([(0, 0), (-4, 0)], target, shape, reach)  # a walker over it
+    assert lookalike_within([(0, 0), (35, 1)], target, shape, reach)  # wrapped: (-5, 1)
+    assert not lookalike_within([(0, 0), (-4, 3)], target, shape, reach)  # beside the box
+    assert not lookalike_within([(0, 0), (7, 0)], target, shape, reach)  # beyond its end
 
 
 def test_re_detection_waits_for_a_loss_and_a_turn_for_a_target_large_enough_to_show_one():

@@ -10,6 +10,8 @@ few milliseconds a frame, with the target's exact box:
 - `walker_group`: a walker in a tight group of walkers dressed alike, all walking together;
 - `tiny_vehicle`: an 11 x 8 px car driving along a road with a few other cars, the camera
   drifting.
+- `walker_crowd`: a walker entering a crowd of walkers in other clothes, one of them passing
+  over it.
 
 A scene is a textured ground (asphalt with lane markings and verges, or paving) seen by a
 camera that drifts slowly over it, and movers (vehicle or walker sprites) that move at a
@@ -300,11 +302,22 @@ def render_aerial(spec: AerialSpec) -> AerialSequence:
     return AerialSequence(spec.name, frames, np.array(boxes))
 
 
-SCENES = ("road_lookalikes", "walker_group", "tiny_vehicle")
+SCENES = ("road_lookalikes", "walker_group", "tiny_vehicle", "walker_crowd")
 """The aerial scenes, each a failure pattern of trackers on UAV sequences (module docstring)."""
 
 RED_CAR = (170, 30, 35)
 SILVER_CAR = (200, 200, 205)
+CROWD = (  # walker_crowd: (start (x, y), velocity (x, y), shirt colour); the target first
+    ((160.0, 110.0), (0.8, 0.6), (40, 90, 160)),
+    ((151.7, 81.8), (0.69, 0.84), (167, 102, 123)),
+    ((151.9, 89.9), (0.71, 0.22), (138, 163, 163)),
+    ((180.7, 135.4), (0.61, 0.47), (156, 73, 35)),
+    ((157.3, 85.6), (0.85, 0.81), (61, 73, 77)),
+    ((161.4, 88.7), (0.84, 0.21), (50, 79, 151)),
+    ((150.4, 86.8), (1.08, 0.53), (113, 48, 98)),
+    ((152.5, 109.5), (1.01, 0.38), (91, 154, 65)),
+    ((157.0, 87.2), (0.43, 0.49), (32, 181, 156)),
+)
 
 
 def aerial_scene(name: str, seed: int = 1) -> AerialSpec:
@@ -317,6 +330,10 @@ def aerial_scene(name: str, seed: int = 1) -> AerialSpec:
       behind, all dressed alike and walking together, the camera shaking.
     - tiny_vehicle: a silver car of 11 x 8 px behind another like it, two oncoming, the camera
       drifting and shaking; the cars pass under two narrow tree crowns.
+    - walker_crowd: a walker (9 x 22 px) with a crowd of six 20-28 px above it, overlapping
+      one another, two of them closing in, while a seventh starts 8 px beside it and passes
+      over it (0.3 px a frame, up and across) and an eighth walks below; all in different
+      clothes, the camera shaking.
     """
     road = 120.0
     if name == "road_lookalikes":
@@ -347,4 +364,10 @@ def aerial_scene(name: str, seed: int = 1) -> AerialSpec:
             name, "road", cars, drift_xy=(3.0, 0.0), trees=((200, 206), (330, 334)),
             shake_px=3.0, noise_sigma=5.0, seed=seed,
         )  # fmt: skip
+    if name == "walker_crowd":
+        walkers = tuple(
+            Mover("walker", (22, 9), start, velocity, colour, 1.0, 20.0, k)
+            for k, (start, velocity, colour) in enumerate(CROWD)
+        )
+        return AerialSpec(name, "paving", walkers, shake_px=3.0, noise_sigma=4.0, seed=seed)
     raise InputError(f"unknown aerial scene {name!r}; choose one of {', '.join(SCENES)}")

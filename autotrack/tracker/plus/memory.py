@@ -164,6 +164,24 @@ def disambiguate(
     return subcell_peak(response, peaks[chosen]), True
 
 
+def lookalike_within(
+    peaks: list[tuple[int, int]],
+    displacement: tuple[float, float],
+    shape: tuple[int, int],
+    reach_cells: np.ndarray,
+) -> bool:
+    """Whether a distinct peak other than the target's lies within `reach_cells` (rows, cols)
+    of the target's `displacement` on both axes: a look-alike whose box overlaps the target's
+    when the reach is one box size. The target's own peak is the one nearest `displacement`.
+    """
+    offsets = [
+        (_wrap(row, shape[0]) - displacement[0], _wrap(col, shape[1]) - displacement[1])
+        for row, col in peaks
+    ]
+    offsets.sort(key=lambda offset: math.hypot(*offset))
+    return any(abs(row) < reach_cells[0] and abs(col) < reach_cells[1] for row, col in offsets[1:])
+
+
 def _cell_distance(cell: tuple[int, int], expected: tuple[float, float], shape) -> float:
     """Distance (cells) of a peak's wrapped displacement from an expected displacement."""
     row, col = _wrap(cell[0], shape[0]), _wrap(cell[1], shape[1])

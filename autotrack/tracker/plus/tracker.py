@@ -87,7 +87,11 @@ class AutoTrackPlus(AutoTrack, beyond_release=True):
         # A low-confidence frame (occluder, loss) changes neither the filter nor the scale.
         if confident:
             upright = self._upright(image)
-            best_scale, self.scale = self.scale_filter.detect(*upright, self.scale)
+            best_scale, scale = self.scale_filter.detect(*upright, self.scale)
+            displacement = (disp_row, disp_col)
+            if scale > self.scale and self._absorbs_lookalike(response, displacement, scale):
+                best_scale, scale = (p.num_scales + 1) // 2 - 1, self.scale  # the scale held
+            self.scale = scale
             self._detect_aspect(image)
 
         # Train on the detection features moved to the new position (release's reuse).
@@ -161,6 +165,22 @@ class AutoTrackPlus(AutoTrack, beyond_release=True):
             prior = self.motion.prior(floor, self.params.cell_size * self.scale)
         margin = self.params.memory_margin
         return memory.disambiguate(response, memory_response, ratio, separation, prior, margin)
+
+    def _absorbs_lookalike(
+        self, response: np.ndarray, displacement: tuple[float, float], grown_scale: float
+    ) -> bool:
+        """Whether the box grown to `grown_scale` would take in a look-alike: a distinct peak of
+        this frame's response (memory.distinct_peaks) within `lookalike_reach` box sizes of the
+        target's, on both axes (memory.lookalike_within); never without `lookalike_reach`."""
+        p = self.params
+        if not p.lookalike_reach:
+            return False
+        grown_hw = self.base_target_size * grown_scale
+        cell_px = p.cell_size * self.scale
+        peaks = memory.distinct_peaks(response, p.distractor_ratio, self.peak_separation)
+        return memory.lookalike_within(
+            peaks, displacement, response.shape, p.lookalike_reach * grown_hw / cell_px
+        )
 
     def _is_confident(
         self, peak_score: float, response: np.ndarray, gate: float | None = None
