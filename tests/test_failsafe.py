@@ -102,7 +102,7 @@ def test_the_scale_does_not_grow_over_a_lookalike_in_a_crowd():
     guarded = _area_ratios(_track(plus, sequence), sequence.boxes)
     assert faithful.max() < 1.5
     assert unguarded.max() > 1.8 and np.median(unguarded[-20:]) > 1.6
-    assert guarded.max() < 1.3 and np.median(guarded[-20:]) < 1.2
+    assert guarded.max() < 1.4 and np.median(guarded[-20:]) < 1.2
 
 
 def test_a_lookalike_counts_within_the_reach_on_both_axes_and_not_the_target_itself():

@@ -175,7 +175,7 @@ class AutoTrackPlus(AutoTrack, beyond_release=True):
         p = self.params
         if not p.lookalike_reach:
             return False
-        grown_hw = self.base_target_size * grown_scale
+        grown_hw = self._box_size_hw() * (grown_scale / self.scale)  # the aspect filter's shape
         cell_px = p.cell_size * self.scale
         peaks = memory.distinct_peaks(response, p.distractor_ratio, self.peak_separation)
         return memory.lookalike_within(
