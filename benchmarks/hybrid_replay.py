@@ -3,7 +3,7 @@ the dev set in seconds instead of a full hybrid run.
 
 `autotrack+` and NanoTrack run once each, on their own, on every sequence; what `fuse` reads of
 them per frame (the filter's box, aberrance flag and theta; the Siamese box, aberrance flag and
-foreground probability at its chosen cell) is saved under `--out`. The replay then walks `fuse`
+foreground probabilities at its chosen cell and at the filter's centre) is saved under `--out`. The replay then walks `fuse`
 over the frames with `HybridTracker`'s bookkeeping of the last (hybrid, filter, Siamese) boxes.
 
 The replay is exact only where the fusion does not feed back into the trackers: with
@@ -31,6 +31,7 @@ from autotrack.evaluation.metrics import score_sequence
 from autotrack.evaluation.runs import single_thread
 from autotrack.hybrid import HybridParams, fuse
 from autotrack.hybrid.tracker import siamese_probability
+from autotrack.nanotrack.tracker import foreground_at
 from autotrack.result import TrackResult
 
 REPO = Path(__file__).resolve().parents[1]
@@ -42,22 +43,25 @@ def record(
     sequence, params: HybridParams | None = None, frames: int | None = None
 ) -> dict[str, np.ndarray]:
     """Both trackers' own runs on a sequence (its first `frames`, default all), one thread: per
-    frame, what `fuse` reads (FIELDS and `siamese_score`, NaN on the first frame)."""
+    frame, what `fuse` reads (FIELDS, `siamese_score` and `siamese_at_filter`, NaN on the first
+    frame)."""
     from autotrack import AutoTrack
     from autotrack.nanotrack import NanoTrack
 
     params = params or HybridParams()
     filter_tracker, siamese = AutoTrack(params.filter_params), NanoTrack(params.siamese_params)
-    rows: dict[str, list] = {name: [] for name in (*FIELDS, "siamese_score")}
+    rows: dict[str, list] = {name: [] for name in (*FIELDS, "siamese_score", "siamese_at_filter")}
     with sequence.frames() as source, single_thread():
         for index in range(len(sequence) if frames is None else min(frames, len(sequence))):
             frame = source.read(index)
             if index == 0:
                 own = filter_tracker.init(frame, sequence.init_box)
                 siamese_result, score = siamese.init(frame, sequence.init_box), math.nan
+                at_filter = math.nan
             else:
                 own, siamese_result = filter_tracker.update(frame), siamese.update(frame)
                 score = siamese_probability(siamese_result, siamese.peak_cell)
+                at_filter = foreground_at(siamese_result, own.center)
             for name, value in zip(
                 FIELDS,
                 (own.box, own.aberrant, own.theta, siamese_result.box, siamese_result.aberrant),
@@ -65,6 +69,7 @@ def record(
             ):
                 rows[name].append(value)
             rows["siamese_score"].append(score)
+            rows["siamese_at_filter"].append(at_filter)
     return {name: np.asarray(values, dtype=np.float64) for name, values in rows.items()}
 
 
@@ -101,7 +106,9 @@ def replay(recorded: dict[str, np.ndarray], params: HybridParams) -> tuple[np.nd
         )
         siamese = _evidence(recorded["siamese_box"][index], recorded["siamese_aberrant"][index])
         score = float(recorded["siamese_score"][index])
-        decision = fuse(own, siamese, score, (box, filter_box, siamese_box), params)
+        at_filter = float(recorded["siamese_at_filter"][index])
+        previous = (box, filter_box, siamese_box)
+        decision = fuse(own, siamese, score, at_filter, previous, params)
         box, filter_box, siamese_box = tuple(float(v) for v in decision.box), own.box, siamese.box
         boxes.append(box)
         trusted.append(decision.trusted)
