@@ -50,7 +50,9 @@ FAR = (160.0, 100.0, 20.0, 20.0)  # a look-alike three box widths away
 
 def test_agreeing_trackers_average_their_boxes_weighted_by_inverse_area():
     siamese = (104.0, 103.0, 16.0, 24.0)
-    plain = fuse(_result(NEAR), _result(siamese), 0.9, 0.0, PREVIOUS, HybridParams(size_weighted=False))
+    plain = fuse(
+        _result(NEAR), _result(siamese), 0.9, 0.0, PREVIOUS, HybridParams(size_weighted=False)
+    )
     assert plain.trusted == BOTH
     assert plain.box == pytest.approx((103.0, 102.0, 18.0, 22.0))
     assert not plain.reinit_filter and not plain.place_siamese
