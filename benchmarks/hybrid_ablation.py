@@ -22,6 +22,7 @@ HYBRID_VARIANTS: dict[str, dict] = {
     HYBRID: {},
     f"{HYBRID} without box averaging": {"average_boxes": False},
     f"{HYBRID} without size weighting": {"size_weighted": False},
+    f"{HYBRID} without likelihood weighting": {"likelihood_weighted": False},
     f"{HYBRID} with filter re-initialisation": {"reinit_filter": True},
     f"{HYBRID} without Siamese re-placing": {"place_siamese": False},
     f"{HYBRID} without continuity": {"continuity": False},
