@@ -22,12 +22,14 @@ HYBRID_VARIANTS: dict[str, dict] = {
     HYBRID: {},
     f"{HYBRID} without box averaging": {"average_boxes": False},
     f"{HYBRID} without size weighting": {"size_weighted": False},
+    f"{HYBRID} without likelihood weighting": {"likelihood_weighted": False},
     f"{HYBRID} with filter re-initialisation": {"reinit_filter": True},
     f"{HYBRID} without Siamese re-placing": {"place_siamese": False},
     f"{HYBRID} without continuity": {"continuity": False},
+    f"{HYBRID} without cross-verification": {"cross_check": False},
 }
 """The hybrid tracker and each of its fusion switches off (`autotrack.hybrid.HybridParams`)."""
-HYBRID_SENSITIVE = ("agree_radius", "siamese_confident")
+HYBRID_SENSITIVE = ("agree_radius", "siamese_confident", "siamese_corroborates")
 """The hybrid's numeric parameters, halved and doubled in the sensitivity rows."""
 
 

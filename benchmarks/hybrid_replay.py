@@ -3,7 +3,7 @@ the dev set in seconds instead of a full hybrid run.
 
 `autotrack+` and NanoTrack run once each, on their own, on every sequence; what `fuse` reads of
 them per frame (the filter's box, aberrance flag and theta; the Siamese box, aberrance flag and
-foreground probability at its chosen cell) is saved under `--out`. The replay then walks `fuse`
+foreground probabilities at its chosen cell and at both box centres) is saved under `--out`. The replay then walks `fuse`
 over the frames with `HybridTracker`'s bookkeeping of the last (hybrid, filter, Siamese) boxes.
 
 The replay is exact only where the fusion does not feed back into the trackers: with
@@ -20,7 +20,7 @@ from __future__ import annotations
 import argparse
 import math
 from concurrent.futures import ProcessPoolExecutor
-from dataclasses import replace
+from dataclasses import astuple, replace
 from multiprocessing import get_context
 from pathlib import Path
 
@@ -30,41 +30,45 @@ from autotrack.evaluation.datasets import load_sequences
 from autotrack.evaluation.metrics import score_sequence
 from autotrack.evaluation.runs import single_thread
 from autotrack.hybrid import HybridParams, fuse
-from autotrack.hybrid.tracker import siamese_probability
+from autotrack.hybrid.tracker import SiameseReading, read_siamese
 from autotrack.result import TrackResult
 
 REPO = Path(__file__).resolve().parents[1]
 SEQUENCES = REPO / ".." / "shared" / "data" / "sequences"
 FIELDS = ("filter_box", "filter_aberrant", "filter_theta", "siamese_box", "siamese_aberrant")
+READING = tuple(f"siamese_{name}" for name in SiameseReading.__dataclass_fields__)
+"""The Siamese map's reading (`SiameseReading`): siamese_score, siamese_at_filter, ..."""
 
 
 def record(
     sequence, params: HybridParams | None = None, frames: int | None = None
 ) -> dict[str, np.ndarray]:
     """Both trackers' own runs on a sequence (its first `frames`, default all), one thread: per
-    frame, what `fuse` reads (FIELDS and `siamese_score`, NaN on the first frame)."""
+    frame, what `fuse` reads (FIELDS and READING, the reading NaN on the first frame)."""
     from autotrack import AutoTrack
     from autotrack.nanotrack import NanoTrack
 
     params = params or HybridParams()
     filter_tracker, siamese = AutoTrack(params.filter_params), NanoTrack(params.siamese_params)
-    rows: dict[str, list] = {name: [] for name in (*FIELDS, "siamese_score")}
+    rows: dict[str, list] = {name: [] for name in (*FIELDS, *READING)}
     with sequence.frames() as source, single_thread():
         for index in range(len(sequence) if frames is None else min(frames, len(sequence))):
             frame = source.read(index)
             if index == 0:
                 own = filter_tracker.init(frame, sequence.init_box)
-                siamese_result, score = siamese.init(frame, sequence.init_box), math.nan
+                siamese_result = siamese.init(frame, sequence.init_box)
+                reading = SiameseReading(math.nan, math.nan, math.nan)
             else:
                 own, siamese_result = filter_tracker.update(frame), siamese.update(frame)
-                score = siamese_probability(siamese_result, siamese.peak_cell)
+                reading = read_siamese(siamese_result, siamese.peak_cell, own.box)
             for name, value in zip(
                 FIELDS,
                 (own.box, own.aberrant, own.theta, siamese_result.box, siamese_result.aberrant),
                 strict=True,
             ):
                 rows[name].append(value)
-            rows["siamese_score"].append(score)
+            for name, value in zip(READING, astuple(reading), strict=True):
+                rows[name].append(value)
     return {name: np.asarray(values, dtype=np.float64) for name, values in rows.items()}
 
 
@@ -100,8 +104,8 @@ def replay(recorded: dict[str, np.ndarray], params: HybridParams) -> tuple[np.nd
             recorded["filter_theta"][index],
         )
         siamese = _evidence(recorded["siamese_box"][index], recorded["siamese_aberrant"][index])
-        score = float(recorded["siamese_score"][index])
-        decision = fuse(own, siamese, score, (box, filter_box, siamese_box), params)
+        reading = SiameseReading(*(float(recorded[name][index]) for name in READING))
+        decision = fuse(own, siamese, reading, (box, filter_box, siamese_box), params)
         box, filter_box, siamese_box = tuple(float(v) for v in decision.box), own.box, siamese.box
         boxes.append(box)
         trusted.append(decision.trusted)

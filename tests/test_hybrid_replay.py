@@ -32,6 +32,10 @@ def test_the_replay_reproduces_the_hybrid_without_re_placing_on_real_frames():
             trusted.append(result.trusted)
     recorded = hybrid_replay.record(sequence, params, frames=FRAMES)
     assert len(recorded["filter_box"]) == FRAMES and np.isnan(recorded["siamese_score"][0])
+    # The Siamese map corroborates the filter's centre on some frames and not on others: the
+    # replay reads the cross-verification's evidence both ways.
+    corroborated = recorded["siamese_at_filter"][1:] >= params.siamese_corroborates
+    assert 0 < np.count_nonzero(corroborated) < FRAMES - 1
     replayed, replayed_trusted = hybrid_replay.replay(recorded, params)
     assert len(set(trusted)) > 1  # more than one branch of the rule fired
     assert replayed_trusted == trusted

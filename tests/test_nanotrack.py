@@ -4,6 +4,7 @@ on real frames, the score map's variations by AutoTrack's functions, refusals of
 from __future__ import annotations
 
 import math
+from dataclasses import replace
 
 import cv2
 import numpy as np
@@ -13,7 +14,15 @@ from autotrack.errors import InputError
 from autotrack.evaluation.datasets import load_otb_sequence
 from autotrack.evaluation.metrics import overlaps
 from autotrack.nanotrack import NanoTrack, NanoTrackParams
-from autotrack.nanotrack.tracker import BACKBONE, HEAD, SCORE_SIZE
+from autotrack.nanotrack.tracker import (
+    BACKBONE,
+    HEAD,
+    INSTANCE_SIZE,
+    SCORE_SIZE,
+    TOTAL_STRIDE,
+    foreground_at,
+)
+from autotrack.result import TrackResult
 from autotrack.tracker import regularization
 from tests.conftest import needs_sequences, shared_sequence_dir
 
@@ -92,6 +101,47 @@ def test_score_map_variations_are_autotracks():
                 assert current.global_variation == regularization.global_variation(expected)
                 assert current.aberrant == (current.global_variation >= NanoTrackParams().phi)
             previous, previous_cell = current, cell
+
+
+def test_foreground_at_reads_the_map_through_the_crop_geometry():
+    score_map = np.arange(SCORE_SIZE * SCORE_SIZE, dtype=np.float32).reshape(SCORE_SIZE, -1)
+    side = 2.0 * INSTANCE_SIZE  # two image pixels per crop pixel
+    result = TrackResult(
+        frame_index=1,
+        box=(0.0, 0.0, 1.0, 1.0),
+        peak_score=0.5,
+        response_map=score_map,
+        local_variation=None,
+        global_variation=math.nan,
+        theta_ref=math.nan,
+        theta=math.nan,
+        aberrant=False,
+        scale_factor=1.0,
+        search_box=(100.0, 40.0, side, side),
+    )
+
+    def image_point(row: float, col: float) -> tuple[float, float]:
+        crop = [(cell - SCORE_SIZE // 2) * TOTAL_STRIDE + INSTANCE_SIZE // 2 for cell in (col, row)]
+        return (100.0 + 2.0 * crop[0], 40.0 + 2.0 * crop[1])
+
+    assert foreground_at(result, image_point(3, 11)) == pytest.approx(score_map[3, 11])
+    between = foreground_at(result, image_point(3.5, 11.25))
+    assert between == pytest.approx(3.5 * SCORE_SIZE + 11.25, abs=1e-3)  # bilinear
+    assert foreground_at(result, image_point(-0.5, 4)) == 0.0  # above the first row of cells
+    assert foreground_at(result, image_point(4, SCORE_SIZE - 0.5)) == 0.0
+    assert math.isnan(foreground_at(replace(result, response_map=None), (0.0, 0.0)))
+
+
+@needs_sequences
+def test_foreground_at_is_high_on_the_target_and_low_beside_it_on_real_frames():
+    sequence = _sequence("OTB", "Crossing")
+    results = _track(sequence, NanoTrack(), 6)[1:]
+    on_target, beside = [], []
+    for index, result in enumerate(results, start=1):
+        x, y, w, h = sequence.ground_truth[index]
+        on_target.append(foreground_at(result, (x + w / 2.0, y + h / 2.0)))
+        beside.append(foreground_at(result, (x + w / 2.0 + 2.0 * w, y + h / 2.0)))  # 2 widths off
+    assert min(on_target) > 0.5 > max(beside)
 
 
 def test_missing_model_is_refused_in_one_line(tmp_path):

@@ -16,17 +16,33 @@ background, does not. The rule (`fuse`):
    it reports (its search region, its cells and its scale steps all scale with it), so the
    inverse-variance weights are 1/area: the box that spread over the target and its
    surroundings (a Siamese box grown over a herd, a filter box that kept a boat's first aspect
-   after it turned) counts less. Nobody is re-initialised: each stays an independent estimate.
-2. They disagree. Each is *credible* when its own evidence is good and it moved continuously
-   (its centre within `agree_radius` of its own last box: no jump): the filter when it learnt
-   this frame (not held), the Siamese network when its foreground probability is at least
-   `siamese_confident` and its score map is not aberrant (eta < phi). When exactly one is
-   credible it is trusted and the other may restart from its box: the Siamese track is moved
+   after it turned) counts less. Each weight is then multiplied by the Siamese foreground
+   probability at the box's centre, the network's likelihood that the centre is on the target:
+   a centre the network's map calls background (the filter's box slipping off a fast gull)
+   counts less. Only the network's map is read so (rule 2 says why). Nobody is re-initialised:
+   each stays an independent estimate.
+2. They disagree, and the Siamese network's own score map says the filter's centre is on the
+   target too (its foreground probability there is at least `siamese_corroborates`): the two
+   models agree on the filter's place and only one backs the Siamese box, so the filter's box
+   is trusted if it moved continuously (cross-verification, `cross_check`), and the Siamese
+   track is moved there as in rule 3. This is the case of a Siamese box sliding along the
+   target or over its surroundings (a motorbike flipping, a box growing over a herd) while the
+   filter stays on it, held or not. Only this direction is read: the network's map is a
+   classifier's verdict on every place of its search crop, while the filter's response away
+   from its peak follows its learnt Gaussian label and measures the distance to its own peak,
+   not whether another place is the target. And only corroboration counts, not refutation: a
+   probability below 0.5 at the filter's centre is also what a target that changed its look
+   gives, where the network is the one that is lost.
+3. They disagree otherwise. Each is *credible* when its own evidence is good and it moved
+   continuously (its centre within `agree_radius` of its own last box: no jump): the filter
+   when it learnt this frame (not held), the Siamese network when its foreground probability is
+   at least `siamese_confident` and its score map is not aberrant (eta < phi). When exactly one
+   is credible it is trusted and the other may restart from its box: the Siamese track is moved
    there keeping its first-frame template (`NanoTrack.place`); re-initialising the filter
    (`reinit_filter`) is off by default, because a filter held on a target that turns or blurs
    is often still right and a new filter forgets what the old one learnt (on the dev set it
    cost more than it saved, docs/hybrid.md).
-3. Both or neither credible: the box that jumped less from the last hybrid box, and nobody is
+4. Both or neither credible: the box that jumped less from the last hybrid box, and nobody is
    restarted (no evidence says who is lost).
 
 Each branch can be switched off (`HybridParams`) for the ablation.
@@ -41,6 +57,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from autotrack.nanotrack import NanoTrack, NanoTrackParams
+from autotrack.nanotrack.tracker import foreground_at
 from autotrack.params import TrackerParams, preset
 from autotrack.result import TrackResult
 
@@ -71,15 +88,25 @@ class HybridParams:
     size_weighted: bool = True
     """Rule 1 weights each box by the inverse of its area (else the plain mean): inverse-variance
     weights when each tracker's error is proportional to the side of the box it reports."""
+    likelihood_weighted: bool = True
+    """Rule 1 multiplies each box's weight by the Siamese foreground probability at its centre,
+    the network's likelihood that the centre is on the target (else the size weights alone)."""
     reinit_filter: bool = False
-    """Rule 2 re-initialises the filter on a credible Siamese box (else the filter keeps
+    """Rule 3 re-initialises the filter on a credible Siamese box (else the filter keeps
     tracking on its own)."""
     place_siamese: bool = True
-    """Rule 2 moves the Siamese track to a credible filter box (else it keeps searching on its
-    own)."""
+    """Rules 2 and 3 move the Siamese track to the trusted filter box (else it keeps searching on
+    its own)."""
     continuity: bool = True
-    """Credibility includes moving continuously (else own evidence only, and rule 3 trusts the
+    """Credibility includes moving continuously (else own evidence only, and rule 4 trusts the
     filter)."""
+    cross_check: bool = True
+    """Rule 2: the filter's box is trusted when the Siamese map corroborates it (else rules 3-4
+    decide from each tracker's own evidence alone)."""
+    siamese_corroborates: float = 0.5
+    """The Siamese foreground probability at the filter's centre from which the network's model
+    backs the filter's box (rule 2): 0.5 is where the softmax says target rather than
+    background, the same reading as `siamese_confident` of the network's own box."""
 
 
 @dataclass(frozen=True)
@@ -134,6 +161,30 @@ def siamese_probability(result: TrackResult, peak_cell: tuple[int, int]) -> floa
     return float(result.response_map[peak_cell])
 
 
+@dataclass(frozen=True)
+class SiameseReading:
+    """What the Siamese score map says of one frame's two hypotheses: foreground probabilities."""
+
+    score: float
+    """At the cell its box came from: the network's confidence in its own box."""
+    at_filter: float
+    """At the filter's box centre (`nanotrack.tracker.foreground_at`)."""
+    at_siamese: float
+    """At its own box centre (`nanotrack.tracker.foreground_at`)."""
+
+
+def read_siamese(
+    siamese_result: TrackResult, peak_cell: tuple[int, int], filter_box: Sequence[float]
+) -> SiameseReading:
+    """The Siamese map's reading of a frame whose boxes are `siamese_result.box` and
+    `filter_box`, its own box having come from `peak_cell`."""
+    return SiameseReading(
+        siamese_probability(siamese_result, peak_cell),
+        foreground_at(siamese_result, centre(filter_box)),
+        foreground_at(siamese_result, centre(siamese_result.box)),
+    )
+
+
 def mean_box(first: Sequence[float], second: Sequence[float], weight: float = 0.5) -> Box:
     """The element-wise weighted mean of two (x, y, w, h) boxes, `weight` on the first."""
     return tuple(
@@ -148,6 +199,13 @@ def inverse_area_weight(first: Sequence[float], second: Sequence[float]) -> floa
     return float(second_area / (first_area + second_area))
 
 
+def likelihood_weight(weight: float, first_probability: float, second_probability: float) -> float:
+    """The first box's share once each box's `weight` (`weight` and 1 - `weight`) is multiplied by
+    the probability that its centre is on the target; `weight` itself when both are 0."""
+    first, second = weight * first_probability, (1.0 - weight) * second_probability
+    return weight if first + second <= 0.0 else float(first / (first + second))
+
+
 def jump(box: Sequence[float], previous: Sequence[float]) -> float:
     """How far a box's centre moved from the previous box's, in units of the previous size."""
     (x, y), (px, py) = centre(box), centre(previous)
@@ -157,34 +215,44 @@ def jump(box: Sequence[float], previous: Sequence[float]) -> float:
 def fuse(
     filter_result: TrackResult,
     siamese_result: TrackResult,
-    siamese_score: float,
+    reading: SiameseReading,
     previous: tuple[Box, Box, Box],
     params: HybridParams,
 ) -> Decision:
     """The fusion rule of one frame (module docstring): the box, whom it trusts, who restarts.
 
-    `siamese_score` is the Siamese foreground probability at its chosen cell; `previous` the
-    last frame's (hybrid, filter, Siamese) boxes."""
+    `reading` is the Siamese map's foreground probabilities (at its chosen cell and at both box
+    centres); `previous` the last frame's (hybrid, filter, Siamese) boxes."""
     previous_box, previous_filter, previous_siamese = previous
     filter_box, siamese_box = filter_result.box, siamese_result.box
     radius = params.agree_radius
     if centres_agree(filter_box, siamese_box, radius):  # rule 1
         if params.average_boxes:
             weight = inverse_area_weight(filter_box, siamese_box) if params.size_weighted else 0.5
+            if params.likelihood_weighted:
+                weight = likelihood_weight(weight, reading.at_filter, reading.at_siamese)
             return Decision(mean_box(filter_box, siamese_box, weight), BOTH, False, False)
         (cx, cy), (_, _, w, h) = centre(filter_box), siamese_box
         return Decision((cx - w / 2.0, cy - h / 2.0, w, h), BOTH, False, False)
-    filter_credible = not filter_held(filter_result)
-    siamese_credible = siamese_score >= params.siamese_confident and not siamese_result.aberrant
-    if params.continuity:
-        filter_credible &= centres_agree(filter_box, previous_filter, radius)
-        siamese_credible &= centres_agree(siamese_box, previous_siamese, radius)
-    if siamese_credible and not filter_credible:  # rule 2
+    filter_continuous = not params.continuity or centres_agree(filter_box, previous_filter, radius)
+    siamese_continuous = not params.continuity or centres_agree(
+        siamese_box, previous_siamese, radius
+    )
+    corroborated = reading.at_filter >= params.siamese_corroborates
+    if params.cross_check and corroborated and filter_continuous:  # rule 2
+        return Decision(filter_box, FILTER, False, params.place_siamese)
+    filter_credible = not filter_held(filter_result) and filter_continuous
+    siamese_credible = (
+        reading.score >= params.siamese_confident
+        and not siamese_result.aberrant
+        and siamese_continuous
+    )
+    if siamese_credible and not filter_credible:  # rule 3
         return Decision(siamese_box, SIAMESE, params.reinit_filter, False)
     if filter_credible and not siamese_credible:
         return Decision(filter_box, FILTER, False, params.place_siamese)
     if params.continuity and jump(siamese_box, previous_box) < jump(filter_box, previous_box):
-        return Decision(siamese_box, SIAMESE, False, False)  # rule 3
+        return Decision(siamese_box, SIAMESE, False, False)  # rule 4
     return Decision(filter_box, FILTER, False, False)
 
 
@@ -235,9 +303,9 @@ class HybridTracker:
         """Track into the next frame with both trackers and fuse their boxes."""
         filter_result = self.filter.update(frame_rgb)
         siamese_result = self.siamese.update(frame_rgb)
-        score = siamese_probability(siamese_result, self.siamese.peak_cell)
+        reading = read_siamese(siamese_result, self.siamese.peak_cell, filter_result.box)
         previous = (self.box, self.filter_box, self.siamese_box)
-        decision = fuse(filter_result, siamese_result, score, previous, self.params)
+        decision = fuse(filter_result, siamese_result, reading, previous, self.params)
         if decision.reinit_filter:
             height, width = frame_rgb.shape[:2]
             self.filter = self._new_filter()

@@ -127,6 +127,26 @@ def crop_square(
     return cv2.resize(patch, (out_side, out_side))
 
 
+def foreground_at(result: TrackResult, point: tuple[float, float]) -> float:
+    """NanoTrack's foreground probability at an image point (x, y): its score map read through
+    the geometry of the search crop the map came from (`result.search_box`: the square resized
+    to INSTANCE_SIZE; cell (row, col) looks at crop pixel (col - 8, row - 8) x TOTAL_STRIDE +
+    INSTANCE_SIZE // 2), bilinear between cells; 0 outside the cells, where the network did not
+    look, and NaN on a result without a map (the first frame)."""
+    if result.response_map is None:
+        return math.nan
+    left, top, side, _ = result.search_box
+    per_pixel = INSTANCE_SIZE / side  # crop pixels per image pixel
+    cells = [
+        ((coordinate - origin) * per_pixel - INSTANCE_SIZE // 2) / TOTAL_STRIDE + SCORE_SIZE // 2
+        for coordinate, origin in ((point[1], top), (point[0], left))
+    ]
+    if not all(0.0 <= cell <= SCORE_SIZE - 1 for cell in cells):
+        return 0.0
+    row, col = cells
+    return float(cv2.getRectSubPix(result.response_map, (1, 1), (col, row))[0, 0])
+
+
 class NanoTrack:
     """NanoTrack V2 on RGB (or grey) uint8 frames: `init(frame, box)`, `update(frame)`, each
     returning a `TrackResult` whose response map is the 16x16 foreground score map."""
