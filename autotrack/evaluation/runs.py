@@ -240,23 +240,27 @@ def _execute(
             yield function(*arguments)
         return
     if executor is not None:
-        yield from _map_unordered(executor, tasks)
+        yield from _unordered(_submit_all(executor, tasks))
         return
-    with (
-        environment(SINGLE_THREAD_ENVIRONMENT),
-        ProcessPoolExecutor(
-            max_workers=min(jobs, len(tasks)), mp_context=get_context("spawn")
-        ) as pool,
-    ):
-        yield from _map_unordered(pool, tasks)
+    with ProcessPoolExecutor(
+        max_workers=min(jobs, len(tasks)), mp_context=get_context("spawn")
+    ) as pool:
+        # The pool starts its workers as the tasks are submitted: only they get the
+        # single-thread environment. Outside this window this process's own numba keeps the
+        # thread count it started with (numba refuses a changed NUMBA_NUM_THREADS once its
+        # threads run), whatever the caller does between results.
+        with environment(SINGLE_THREAD_ENVIRONMENT):
+            futures = _submit_all(pool, tasks)
+        yield from _unordered(futures)
 
 
-def _map_unordered(
+def _submit_all(
     executor: Executor, tasks: list[tuple[Callable[..., TaskResult], tuple]]
-) -> Iterator[TaskResult]:
-    futures: list[Future[TaskResult]] = [
-        executor.submit(function, *arguments) for function, arguments in tasks
-    ]
+) -> list[Future[TaskResult]]:
+    return [executor.submit(function, *arguments) for function, arguments in tasks]
+
+
+def _unordered(futures: list[Future[TaskResult]]) -> Iterator[TaskResult]:
     try:
         for future in as_completed(futures):
             yield future.result()
