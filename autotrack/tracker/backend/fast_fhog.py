@@ -13,7 +13,12 @@ import numpy as np
 from numba import njit
 
 from autotrack.errors import InputError
-from autotrack.tracker.backend.gradients import gradient_histogram, planar_float32
+from autotrack.tracker.backend.gradients import (
+    gradient_histogram,
+    histogram_extent,
+    planar_float32,
+    strongest_gradients,
+)
 from autotrack.tracker.fhog import (
     ACOS_OFFSET,
     TEXTURE_WEIGHT,
@@ -156,51 +161,32 @@ def _insensitive_sums(by_channel, n_orients):
 
 
 @njit(cache=True, nogil=True, fastmath=False, error_model="numpy")
-def _fhog_into(image, cell, n_orients, clip, bins, weights, out):
-    """fhog of one (H, W, C) image, each cell's values times `weights[y, x]`, into `out`
-    (>= 3n+4, H//cell, W//cell), channel-first, any strides (a channel-first slice of a
-    transform's input buffer, or a transposed view of a channel-last array); channels past
-    3n+4 (the toolbox's zero channel) are left as they are.
+def _normalised_cells(hist, n_orients, cell, clip, weights, out):
+    """The cells of one image's histogram (`gradient_histogram`, (3n, hb, wb), the insensitive
+    bins still zero) normalised, each cell's values times `weights[y, x]`, into `out`
+    (>= 3n+4, hb, wb), channel-first, any strides (a channel-first slice of a transform's input
+    buffer, or a transposed view of a channel-last array); channels past 3n+4 (the toolbox's
+    zero channel) are left as they are.
 
     A float32 product rounds once wherever it is taken, so `out` holds exactly what the
     unweighted features times the weights would give (weights of one give the features).
     """
-    hb, wb = out.shape[1], out.shape[2]
-    if hb == 0 or wb == 0:
-        return
-    # The 2n sensitive bins then the n insensitive ones, channel-major (one plane per bin).
-    bins_by_channel = np.zeros((3 * n_orients, hb, wb), np.float32)
-    planes = planar_float32(image)
-    gradient_histogram(planes, cell, 2 * n_orients, bins, bins_by_channel, planes.shape[2], wb)
-    _insensitive_sums(bins_by_channel, n_orients)
+    hb, wb = hist.shape[1], hist.shape[2]
+    _insensitive_sums(hist, n_orients)
     factors = np.empty((4, hb, wb), np.float32)
-    _cell_factors(_block_normalisers(bins_by_channel[2 * n_orients :], cell), factors, 0)
-    _normalised_channels(bins_by_channel, n_orients, factors, clip, weights, out)
+    _cell_factors(_block_normalisers(hist[2 * n_orients :], cell), factors, 0)
+    _normalised_channels(hist, n_orients, factors, clip, weights, out)
 
 
 @njit(cache=True, nogil=True, fastmath=False, error_model="numpy")
-def _fhog_batch_into(images, cell, n_orients, clip, bins, sample_weights, out):
-    """`_fhog_into` of each image into `out` (N, H//cell, W//cell, C), channel-last, all of
-    image i's values times `sample_weights[i]` (channels `_fhog_into` leaves stay zero).
+def _normalised_batch_cells(side_by_side, n_orients, cell, clip, sample_weights, out):
+    """`_normalised_cells` of N images' histograms side by side (3n, rows, N cols) into `out`
+    (N, rows, cols, C), channel-last, all of image i's values times `sample_weights[i]`
+    (channels it leaves stay as they are).
 
-    The images are taken side by side, as one image N times as wide whose every image keeps
-    its own borders (`_gradient_histogram`), and normalised side by side too (each image's
-    block normalisers its own): the scale filter's 22 x 22 samples gave rows of 20 pixels and
-    5 cells."""
+    Normalised side by side (each image's block normalisers its own): the scale filter's
+    22 x 22 samples gave rows of 20 pixels and 5 cells."""
     count, rows, cols, channels = out.shape
-    if count == 0 or rows == 0 or cols == 0:
-        out[:] = 0.0
-        return
-    height, width, colours = images.shape[1], images.shape[2], images.shape[3]
-    planes = np.empty((colours, height, count * width), np.float32)
-    for i in range(count):
-        sample = planar_float32(images[i])
-        for c in range(colours):
-            for y in range(height):
-                for x in range(width):
-                    planes[c, y, i * width + x] = sample[c, y, x]
-    side_by_side = np.zeros((3 * n_orients, rows, count * cols), np.float32)
-    gradient_histogram(planes, cell, 2 * n_orients, bins, side_by_side, width, cols)
     _insensitive_sums(side_by_side, n_orients)
     factors = np.empty((4, rows, count * cols), np.float32)
     weights = np.empty((rows, count * cols), np.float32)
@@ -216,6 +202,21 @@ def _fhog_batch_into(images, cell, n_orients, clip, bins, sample_weights, out):
             for x in range(cols):
                 for c in range(channels):
                     target[y, x, c] = channel_first[c, y, i * cols + x]
+
+
+def _histogram(pixels: np.ndarray, cell: int, n_orients: int, cells: tuple[int, int]):
+    """The (3n, rows, N cols) histogram of the (N, H, W, C) images side by side, each image's
+    `cells` (rows, cols) of cells its own: `planar_float32`, `strongest_gradients` and
+    `gradient_histogram`, three kernels called one after the other (each compiled on its own:
+    a kernel that calls another recompiles the callee's code into its own)."""
+    count, _, width = pixels.shape[:3]
+    planes = planar_float32(pixels)
+    hist = np.zeros((3 * n_orients, cells[0], count * cells[1]), np.float32)
+    rows, cols = histogram_extent(hist.shape, cell, width, cells[1])
+    gradients = strongest_gradients(planes, rows, cols, width)
+    bins = orientation_bins(n_orients)
+    gradient_histogram(gradients, cell, 2 * n_orients, bins, hist, width, cells[1])
+    return hist
 
 
 def fhog(
@@ -235,16 +236,7 @@ def fhog(
         (height // cell_size, width // cell_size, fhog_channels(n_orients)), dtype=np.float32
     )
     weights = np.ones(out.shape[:2], np.float32)
-    bins = orientation_bins(int(n_orients))
-    _fhog_into(
-        pixels,
-        int(cell_size),
-        int(n_orients),
-        np.float32(clip),
-        bins,
-        weights,
-        out.transpose(2, 0, 1),
-    )
+    _fhog_into(pixels, int(cell_size), int(n_orients), clip, weights, out.transpose(2, 0, 1))
     return out
 
 
@@ -269,8 +261,7 @@ def fhog_weighted_into(
             f"fhog of a {pixels.shape[0]} x {pixels.shape[1]} image at cell {cell_size} needs "
             f"weights {cells} and out {shape}, got {weights.shape} and {out.shape}"
         )
-    bins = orientation_bins(int(n_orients))
-    _fhog_into(pixels, int(cell_size), int(n_orients), np.float32(clip), bins, weights, out)
+    _fhog_into(pixels, int(cell_size), int(n_orients), clip, weights, out)
 
 
 def fhog_batch(
@@ -302,7 +293,25 @@ def fhog_batch(
         if weights.shape != (count,):
             raise InputError(f"fhog_batch needs {count} sample weights, got {weights.shape}")
         channels -= FHOG_TRUNCATION_CHANNELS
-    out = np.empty((count, height // cell_size, width // cell_size, channels), np.float32)
-    bins = orientation_bins(int(n_orients))
-    _fhog_batch_into(pixels, int(cell_size), int(n_orients), np.float32(clip), bins, weights, out)
+    out = np.zeros((count, height // cell_size, width // cell_size, channels), np.float32)
+    if out.size:
+        hist = _histogram(pixels, int(cell_size), int(n_orients), out.shape[1:3])
+        _normalised_batch_cells(
+            hist, int(n_orients), int(cell_size), np.float32(clip), weights, out
+        )
     return out
+
+
+def _fhog_into(
+    pixels: np.ndarray,
+    cell: int,
+    n_orients: int,
+    clip: float,
+    weights: np.ndarray,
+    out: np.ndarray,
+) -> None:
+    """fhog of one (H, W, C) image times `weights` into `out` (>= 3n+4, H//cell, W//cell),
+    channel-first, any strides (`_normalised_cells`)."""
+    if out.shape[1] and out.shape[2]:
+        hist = _histogram(pixels[None], cell, n_orients, out.shape[1:])
+        _normalised_cells(hist, n_orients, cell, np.float32(clip), weights, out)
