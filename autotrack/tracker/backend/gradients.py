@@ -123,19 +123,15 @@ def strongest_gradients(planes, rows, cols, sample_width):
     channels = planes.shape[0]
     gradients = np.empty((3, rows, cols), np.float32)
     gx, gy, squared = gradients[0], gradients[1], gradients[2]
-    # One row's x and y gradients of each channel, then a chosen row's three values.
-    scratch = np.empty((2 * channels + 3, cols), np.float32)
-    chosen_x, chosen_y = scratch[2 * channels], scratch[2 * channels + 1]
-    chosen_squared = scratch[2 * channels + 2]
-    grey = channels == 1  # nothing to choose: the gradients go straight into the result
+    scratch = np.empty((7, cols), np.float32)  # one row's x and y gradients of each channel
+    gx0, gy0, gx1, gy1 = scratch[0], scratch[1], scratch[2], scratch[3]
+    gx2, gy2, chosen_squared = scratch[4], scratch[5], scratch[6]
     for y in range(rows):
         row_gx, row_gy, row_squared = gx[y], gy[y], squared[y]
-        for c in range(channels):  # one call site: row_gradients is compiled in once, not 3x
-            target_x, target_y = (row_gx, row_gy) if grey else (scratch[2 * c], scratch[2 * c + 1])
-            row_gradients(planes[c], y, target_x, target_y, sample_width)
         if channels == 3:
-            gx0, gy0, gx1, gy1 = scratch[0], scratch[1], scratch[2], scratch[3]
-            gx2, gy2 = scratch[4], scratch[5]
+            row_gradients(planes[0], y, gx0, gy0, sample_width)
+            row_gradients(planes[1], y, gx1, gy1, sample_width)
+            row_gradients(planes[2], y, gx2, gy2, sample_width)
             for x in range(cols):
                 best_x, best_y = gx0[x], gy0[x]
                 best = best_x * best_x + best_y * best_y
@@ -143,21 +139,19 @@ def strongest_gradients(planes, rows, cols, sample_width):
                 best, best_x, best_y = _stronger(best, best_x, best_y, gx2[x], gy2[x])
                 row_squared[x], row_gx[x], row_gy[x] = best, best_x, best_y
             continue
-        first_x, first_y = scratch[0], scratch[1]
+        row_gradients(planes[0], y, row_gx, row_gy, sample_width)
         for x in range(cols):
-            if not grey:  # (an array assignment would compile numba's shape-error message code)
-                row_gx[x], row_gy[x] = first_x[x], first_y[x]
             row_squared[x] = row_gx[x] * row_gx[x] + row_gy[x] * row_gy[x]
         for c in range(1, channels):  # another count: the choice into scratch, then copied
-            candidate_x, candidate_y = scratch[2 * c], scratch[2 * c + 1]
+            row_gradients(planes[c], y, gx0, gy0, sample_width)
             for x in range(cols):
-                chosen_squared[x], chosen_x[x], chosen_y[x] = _stronger(
-                    row_squared[x], row_gx[x], row_gy[x], candidate_x[x], candidate_y[x]
+                chosen_squared[x], gx1[x], gy1[x] = _stronger(
+                    row_squared[x], row_gx[x], row_gy[x], gx0[x], gy0[x]
                 )
             for x in range(cols):
                 row_squared[x] = chosen_squared[x]
-                row_gx[x] = chosen_x[x]
-                row_gy[x] = chosen_y[x]
+                row_gx[x] = gx1[x]
+                row_gy[x] = gy1[x]
     return gradients
 
 
