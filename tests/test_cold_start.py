@@ -18,7 +18,7 @@ import cold_start  # noqa: E402
 
 FHOG_STAGES = (
     "gradients:planar_float32",
-    "gradients:strongest_gradients",
+    "gradients:_rgb_gradients",
     "gradients:gradient_histogram",
     "fast_fhog:_cell_factor_planes",
     "fast_fhog:_normalised_channels",
@@ -40,5 +40,6 @@ def test_a_fresh_process_compiles_each_tracker_kernel_once(tmp_path):
     # first, nested in the caller's compile events, which `run` counts apart from its own.
     for stage in FHOG_STAGES:
         assert figures["nested"].get(f"autotrack.tracker.backend.{stage}", 0) == 0, stage
-    # The colour run takes the RGB crop only: the general crop kernel is not compiled.
+    # A colour video takes the RGB kernels only: the general crop and gradients are not compiled.
     assert "area_resample:_area_crop_gathered" not in ours
+    assert "gradients:_any_channel_gradients" not in ours

@@ -103,8 +103,7 @@ def _stronger(best, best_x, best_y, candidate_x, candidate_y):
     return best, best_x, best_y
 
 
-@njit(cache=True, nogil=True, fastmath=False, error_model="numpy")
-def strongest_gradients(planes, rows, cols, sample_width):
+def strongest_gradients(planes: np.ndarray, rows: int, cols: int, sample_width: int) -> np.ndarray:
     """gradMag's choice of channel: per pixel of the first `rows` x `cols`, the x and y
     gradients of the channel with the largest squared magnitude (a later channel only if
     strictly larger) and that magnitude, as one float32 (3, rows, cols) array.
@@ -114,35 +113,55 @@ def strongest_gradients(planes, rows, cols, sample_width):
     LLVM reads `gx[x] = cx if larger else gx[x]` as a store only where `larger` holds and
     vectorises it with masked stores (vmaskmovps), which AMD's Zen cores run at a fraction of a
     plain store's rate (1.5x slower on RGB search patches; `benchmarks/kernel_asm.py` lists any
-    kernel that has them). The comparisons and products are the same throughout. The
-    whole image in one call: a call a row cost more than the work on the scale filter's small
+    kernel that has them). The comparisons and products are the same throughout. The two are
+    kernels of their own: a video compiles only the one its frames need. The whole image in
+    one call: a call a row cost more than the work on the scale filter's small
     samples. A grey image has no choice to make: its gradients and their squared magnitude.
     Images side by side, `sample_width` columns each, take their gradients as `row_gradients`
     does.
     """
+    if planes.shape[0] == 3:
+        return _rgb_gradients(planes, rows, cols, sample_width)
+    return _any_channel_gradients(planes, rows, cols, sample_width)
+
+
+@njit(cache=True, nogil=True, fastmath=False, error_model="numpy")
+def _rgb_gradients(planes, rows, cols, sample_width):
+    """`strongest_gradients` of three planes: the choice in registers."""
+    gradients = np.empty((3, rows, cols), np.float32)
+    gx, gy, squared = gradients[0], gradients[1], gradients[2]
+    scratch = np.empty((6, cols), np.float32)  # one row's x and y gradients of each channel
+    gx0, gy0, gx1, gy1 = scratch[0], scratch[1], scratch[2], scratch[3]
+    gx2, gy2 = scratch[4], scratch[5]
+    for y in range(rows):
+        row_gx, row_gy, row_squared = gx[y], gy[y], squared[y]
+        row_gradients(planes[0], y, gx0, gy0, sample_width)
+        row_gradients(planes[1], y, gx1, gy1, sample_width)
+        row_gradients(planes[2], y, gx2, gy2, sample_width)
+        for x in range(cols):
+            best_x, best_y = gx0[x], gy0[x]
+            best = best_x * best_x + best_y * best_y
+            best, best_x, best_y = _stronger(best, best_x, best_y, gx1[x], gy1[x])
+            best, best_x, best_y = _stronger(best, best_x, best_y, gx2[x], gy2[x])
+            row_squared[x], row_gx[x], row_gy[x] = best, best_x, best_y
+    return gradients
+
+
+@njit(cache=True, nogil=True, fastmath=False, error_model="numpy")
+def _any_channel_gradients(planes, rows, cols, sample_width):
+    """`strongest_gradients` of any number of planes: the first channel's gradients, then each
+    later channel's choice into scratch rows, copied back (a grey image: its gradients)."""
     channels = planes.shape[0]
     gradients = np.empty((3, rows, cols), np.float32)
     gx, gy, squared = gradients[0], gradients[1], gradients[2]
-    scratch = np.empty((7, cols), np.float32)  # one row's x and y gradients of each channel
-    gx0, gy0, gx1, gy1 = scratch[0], scratch[1], scratch[2], scratch[3]
-    gx2, gy2, chosen_squared = scratch[4], scratch[5], scratch[6]
+    scratch = np.empty((5, cols), np.float32)  # a channel's row, then the chosen values
+    gx0, gy0, gx1, gy1, chosen_squared = scratch[0], scratch[1], scratch[2], scratch[3], scratch[4]
     for y in range(rows):
         row_gx, row_gy, row_squared = gx[y], gy[y], squared[y]
-        if channels == 3:
-            row_gradients(planes[0], y, gx0, gy0, sample_width)
-            row_gradients(planes[1], y, gx1, gy1, sample_width)
-            row_gradients(planes[2], y, gx2, gy2, sample_width)
-            for x in range(cols):
-                best_x, best_y = gx0[x], gy0[x]
-                best = best_x * best_x + best_y * best_y
-                best, best_x, best_y = _stronger(best, best_x, best_y, gx1[x], gy1[x])
-                best, best_x, best_y = _stronger(best, best_x, best_y, gx2[x], gy2[x])
-                row_squared[x], row_gx[x], row_gy[x] = best, best_x, best_y
-            continue
         row_gradients(planes[0], y, row_gx, row_gy, sample_width)
         for x in range(cols):
             row_squared[x] = row_gx[x] * row_gx[x] + row_gy[x] * row_gy[x]
-        for c in range(1, channels):  # another count: the choice into scratch, then copied
+        for c in range(1, channels):
             row_gradients(planes[c], y, gx0, gy0, sample_width)
             for x in range(cols):
                 chosen_squared[x], gx1[x], gy1[x] = _stronger(
