@@ -116,10 +116,10 @@ def main() -> int:
     ranked = sorted(first["compile"].items(), key=lambda item: -item[1])
     for name, seconds in ranked[: args.top]:
         print(f"    {seconds:6.2f} s  {name.split(':')[-1]}")
-    rest = sum(seconds for _, seconds in ranked[args.top :])
-    print(
-        f"    {rest:6.2f} s  {len(ranked) - args.top} others (numba's own numpy overloads included)"
-    )
+    if len(ranked) > args.top:
+        rest = sum(seconds for _, seconds in ranked[args.top :])
+        others = f"{len(ranked) - args.top} others (numba's own numpy overloads included)"
+        print(f"    {rest:6.2f} s  {others}")
     return 0
 
 
