@@ -72,9 +72,8 @@ def _block_normalisers(hist, n_orients, first, wb, cell):
     norm = np.zeros((hb + 1, wb + 1), np.float32)
     for o in range(2 * n_orients, 3 * n_orients):
         for y in range(hb):
-            cells = hist[o, y]
-            for x in range(wb):
-                value = cells[first + x]
+            for x in range(wb):  # plain indexing: a view per row would cost reference counts
+                value = hist[o, y, first + x]
                 norm[y + 1, x + 1] += value * value
     eps = np.float32(1e-4) / np.float32(4.0)
     for _ in range(4):
