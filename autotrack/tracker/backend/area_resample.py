@@ -347,7 +347,7 @@ def _rgb_row_sums(span, first_red, weight, target):
                 target[3 * dx + c] = (pair + span[b + c + 6] * w2) + span[b + c + 9] * w3
 
 
-@njit(cache=True, nogil=True, fastmath=False, error_model="numpy", inline="always")
+@njit(cache=True, nogil=True, fastmath=False, error_model="numpy")
 def _crop_taps(src_h, src_w, dst_h, dst_w):
     """Both axes' `_area_taps` of an src_h x src_w crop shrunk to dst_h x dst_w, and the largest
     horizontal tap count: (x taps, x weights, x offsets, y taps, y weights, y offsets, taps)."""
