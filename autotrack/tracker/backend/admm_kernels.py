@@ -13,7 +13,7 @@ import numpy as np
 from numba import njit
 
 
-@njit(cache=True, nogil=True, fastmath=False)
+@njit(cache=True, nogil=True, fastmath=False, error_model="numpy")
 def training_sums(xf, g_prev, s_xx, s_gx):
     """The g-step's per-frequency terms constant within a frame, in one pass over the channels:
     s_xx = sum_k |x_k|^2 (float32) and s_gx = sum_k conj(x_k) g_prev_k; numpy:
@@ -42,7 +42,7 @@ NO_SPECTRA = np.zeros((0, 0), np.complex64)
 is ever written to it; writeable, as the kernel's one signature takes it)."""
 
 
-@njit(cache=True, nogil=True, fastmath=False)
+@njit(cache=True, nogil=True, fastmath=False, error_model="numpy")
 def g_step_kernel(
     xf,
     yf,

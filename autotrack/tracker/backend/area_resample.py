@@ -213,12 +213,14 @@ def _area_from_region(region, row0, col0, src_h, src_w, out, buffers):
 def _area_samples(image, tops, lefts, heights, widths, out):
     """All crops from one transposed copy of their bounding box (they overlap heavily), with one
     set of scratch arrays."""
-    top, left = tops.min(), lefts.min()
-    bottom, right = (tops + heights).max(), (lefts + widths).max()
+    top, left, bottom, right = tops[0], lefts[0], tops[0] + heights[0], lefts[0] + widths[0]
+    max_h, max_w = heights[0], widths[0]
+    for i in range(1, tops.shape[0]):
+        top, left = min(top, tops[i]), min(left, lefts[i])
+        bottom, right = max(bottom, tops[i] + heights[i]), max(right, lefts[i] + widths[i])
+        max_h, max_w = max(max_h, heights[i]), max(max_w, widths[i])
     region = _transposed_region(image, top, left, bottom - top, right - left)
-    buffers = _region_buffers(
-        region.shape[0], heights.max(), widths.max(), out.shape[1], out.shape[2]
-    )
+    buffers = _region_buffers(region.shape[0], max_h, max_w, out.shape[1], out.shape[2])
     for i in range(tops.shape[0]):
         _area_from_region(
             region, tops[i] - top, lefts[i] - left, heights[i], widths[i], out[i], buffers
@@ -251,8 +253,11 @@ def _padded_row_taps(x_src, x_weight, x_offsets, left, width, channels):
                 index[j, dx * channels + c] = column * channels + c
                 if first + j < last:
                     weight[j, dx * channels + c] = x_weight[k]
-    start = index.min()
-    stop = index.max() + 1
+    start, stop = index[0, 0], index[0, 0] + 1
+    for j in range(taps):
+        for i in range(dst_w * channels):
+            start = min(start, index[j, i])
+            stop = max(stop, index[j, i] + 1)
     offsets = np.empty((taps, dst_w * channels), np.uint32)  # unsigned: no wraparound test
     for j in range(taps):
         for i in range(dst_w * channels):
@@ -343,19 +348,9 @@ def _rgb_row_sums(span, first_red, weight, target):
 
 
 @njit(cache=True, nogil=True, fastmath=False, error_model="numpy")
-def _area_crop(image, top, left, src_h, src_w, out):
-    """One large crop: ResizeArea_Invoker in the image's own (row, col, channel) layout.
-
-    Each source row's horizontal sums are computed once (OpenCV recomputes a row shared by two
-    output rows, with the same result) from the row converted to float32 once; the vertical
-    pass then runs vectorised along the row. Three channels with two to four taps (RGB search
-    patches shrunk by less than ~3x) sum by output column (`_rgb_row_sums`); any other case up
-    to four taps a pass over the whole output row (`_gathered_row_sums`). numba does not
-    vectorise the gathers; transposing rows into SIMD lanes to avoid them was measured slower
-    (docs/benchmarks.md, ninth round).
-    """
-    height, width, channels = image.shape
-    dst_h, dst_w = out.shape[0], out.shape[1]
+def _crop_taps(src_h, src_w, dst_h, dst_w):
+    """Both axes' `_area_taps` of an src_h x src_w crop shrunk to dst_h x dst_w, and the largest
+    horizontal tap count: (x taps, x weights, x offsets, y taps, y weights, y offsets, taps)."""
     x_src = np.empty(2 * src_w + 2, np.int64)
     x_weight = np.empty(2 * src_w + 2, np.float32)
     x_offsets = np.empty(dst_w + 1, np.int64)
@@ -364,36 +359,73 @@ def _area_crop(image, top, left, src_h, src_w, out):
     y_offsets = np.empty(dst_h + 1, np.int64)
     _area_taps(src_w, dst_w, x_src, x_weight, x_offsets)
     _area_taps(src_h, dst_h, y_src, y_weight, y_offsets)
+    taps = 0
+    for dx in range(dst_w):
+        taps = max(taps, x_offsets[dx + 1] - x_offsets[dx])
+    return x_src, x_weight, x_offsets, y_src, y_weight, y_offsets, taps
+
+
+@njit(cache=True, nogil=True, fastmath=False, error_model="numpy")
+def _area_crop_rgb(image, top, left, src_h, src_w, out):
+    """One large crop of a three-channel image: ResizeArea_Invoker in the image's own (row, col,
+    channel) layout, when every output column takes two to four horizontal taps (RGB search
+    patches shrunk by less than ~3x); returns False, doing nothing, otherwise
+    (`_area_crop_gathered` then takes it).
+
+    Each source row's horizontal sums are computed once (OpenCV recomputes a row shared by two
+    output rows, with the same result) from the row converted to float32 once, by output column
+    (`_rgb_row_sums`); the vertical pass then runs vectorised along the row. numba does not
+    vectorise the gathers; transposing rows into SIMD lanes to avoid them was measured slower
+    (docs/benchmarks.md, ninth round).
+    """
+    height, width, channels = image.shape
+    dst_h, dst_w = out.shape[0], out.shape[1]
+    x_src, x_weight, x_offsets, y_src, y_weight, y_offsets, taps = _crop_taps(
+        src_h, src_w, dst_h, dst_w
+    )
+    if channels != 3 or taps < 2 or taps > 4:
+        return False
     row_width = dst_w * channels
     horizontal = np.empty((src_h, row_width), np.float32)
     flat = image.reshape(height, width * channels)
-    taps = np.max(x_offsets[1:] - x_offsets[:-1])
-    if channels == 3 and 2 <= taps <= 4:
-        first_red, weight = _rgb_taps(x_src, x_weight, x_offsets, taps)
-        span = np.zeros(3 * (src_w + taps), np.float32)  # the crop's row, then a zero tail
-        inside = left >= 0 and left + src_w <= width
-        for r in range(src_h):
-            pixels = flat[min(max(top + r, 0), height - 1)]
-            if inside:
-                row = pixels[3 * left : 3 * (left + src_w)]
-                for q in range(3 * src_w):
-                    span[q] = np.float32(row[q])
-            else:  # columns clamped into the image: the replicated border
-                for q in range(src_w):
-                    column = 3 * min(max(left + q, 0), width - 1)
-                    for c in range(3):
-                        span[3 * q + c] = np.float32(pixels[column + c])
-            _rgb_row_sums(span, first_red, weight, horizontal[r])
-    else:
-        index, weight, start, stop = _padded_row_taps(
-            x_src, x_weight, x_offsets, left, width, channels
-        )
-        span = np.empty(stop - start, np.float32)
-        for r in range(src_h):
-            pixels = flat[min(max(top + r, 0), height - 1)][start:stop]
-            for q in range(stop - start):
-                span[q] = np.float32(pixels[q])
-            _gathered_row_sums(span, index, weight, horizontal[r])
+    first_red, weight = _rgb_taps(x_src, x_weight, x_offsets, taps)
+    span = np.zeros(3 * (src_w + taps), np.float32)  # the crop's row, then a zero tail
+    inside = left >= 0 and left + src_w <= width
+    for r in range(src_h):
+        pixels = flat[min(max(top + r, 0), height - 1)]
+        if inside:
+            row = pixels[3 * left : 3 * (left + src_w)]
+            for q in range(3 * src_w):
+                span[q] = np.float32(row[q])
+        else:  # columns clamped into the image: the replicated border
+            for q in range(src_w):
+                column = 3 * min(max(left + q, 0), width - 1)
+                for c in range(3):
+                    span[3 * q + c] = np.float32(pixels[column + c])
+        _rgb_row_sums(span, first_red, weight, horizontal[r])
+    _vertical_pass(horizontal, y_src, y_weight, y_offsets, out, np.empty(row_width, np.float32))
+    return True
+
+
+@njit(cache=True, nogil=True, fastmath=False, error_model="numpy")
+def _area_crop_gathered(image, top, left, src_h, src_w, out):
+    """One large crop, any channel count and tap count (`_area_crop_rgb`'s other cases): up to
+    four taps a pass over the whole output row (`_gathered_row_sums`), then the vertical pass."""
+    height, width, channels = image.shape
+    dst_h, dst_w = out.shape[0], out.shape[1]
+    x_src, x_weight, x_offsets, y_src, y_weight, y_offsets, _ = _crop_taps(
+        src_h, src_w, dst_h, dst_w
+    )
+    row_width = dst_w * channels
+    horizontal = np.empty((src_h, row_width), np.float32)
+    flat = image.reshape(height, width * channels)
+    index, weight, start, stop = _padded_row_taps(x_src, x_weight, x_offsets, left, width, channels)
+    span = np.empty(stop - start, np.float32)
+    for r in range(src_h):
+        pixels = flat[min(max(top + r, 0), height - 1)][start:stop]
+        for q in range(stop - start):
+            span[q] = np.float32(pixels[q])
+        _gathered_row_sums(span, index, weight, horizontal[r])
     _vertical_pass(horizontal, y_src, y_weight, y_offsets, out, np.empty(row_width, np.float32))
 
 
@@ -422,7 +454,10 @@ def area_resize_crop(
     rows, cols = int(size_hw[0]), int(size_hw[1])
     pixels, row0, col0 = _kernel_pixels(image, lambda: (top, left, top + rows, left + cols))
     out = np.empty((int(out_hw[0]), int(out_hw[1]), pixels.shape[2]), np.uint8)
-    _area_crop(pixels, int(top) - row0, int(left) - col0, rows, cols, out)
+    # Two kernels, not one with two paths: only the path a video needs is compiled.
+    crop = (pixels, int(top) - row0, int(left) - col0, rows, cols, out)
+    if not _area_crop_rgb(*crop):
+        _area_crop_gathered(*crop)
     return out if image.ndim == 3 else out[..., 0]
 
 

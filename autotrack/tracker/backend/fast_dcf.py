@@ -223,7 +223,7 @@ def correlation_spectrum(g_f: np.ndarray, zf: np.ndarray) -> np.ndarray:
     return out
 
 
-@njit(cache=True, nogil=True, fastmath=False)
+@njit(cache=True, nogil=True, fastmath=False, error_model="numpy")
 def _correlation_kernel(g_f, zf, out):
     channels, rows, cols = zf.shape
     out[:] = 0
@@ -245,7 +245,7 @@ def centred_response(response: np.ndarray) -> np.ndarray:
     return centred
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, fastmath=False, error_model="numpy")
 def _half_rolled(values, out):
     """out = np.roll(values, (rows // 2, cols // 2), axis=(0, 1)), cast to out's type."""
     rows, cols = values.shape
@@ -256,7 +256,7 @@ def _half_rolled(values, out):
             out[r, c] = source[c - shift_c if c >= shift_c else c - shift_c + cols]
 
 
-@njit(cache=True, nogil=True, fastmath=False)
+@njit(cache=True, nogil=True, fastmath=False, error_model="numpy")
 def _newton_kernel(response_f, ky, kx, ky_sq, kx_sq, pos_y, pos_x, iterations):
     """Newton's iterations on the Fourier series of a response (the release's, in loops): the
     peak position (radians per axis) and the interpolated score times rows * cols."""

@@ -13,7 +13,12 @@ import numpy as np
 from numba import njit
 
 from autotrack.errors import InputError
-from autotrack.tracker.backend.gradients import gradient_histogram, planar_float32
+from autotrack.tracker.backend.gradients import (
+    gradient_histogram,
+    histogram_extent,
+    planar_float32,
+    strongest_gradients,
+)
 from autotrack.tracker.fhog import (
     ACOS_OFFSET,
     TEXTURE_WEIGHT,
@@ -54,19 +59,21 @@ def orientation_bins(n_orients: int) -> np.ndarray:
 
 
 @njit(cache=True, nogil=True, fastmath=False, error_model="numpy")
-def _block_normalisers(insensitive, cell):
-    """hogNormMatrix: 1/sqrt(2x2 block energy + eps) on an (hb+1, wb+1) grid, border copied.
+def _block_normalisers(hist, n_orients, first, wb, cell):
+    """hogNormMatrix of one image's cells, columns first..first+wb of a histogram's insensitive
+    bins (`hist[2n:3n]`, read in place: a C-contiguous array's rows vectorise, a view's
+    would not): 1/sqrt(2x2 block energy + eps) on an (hb+1, wb+1) grid, border copied.
 
     Entry [i+1, j+1] belongs to the block whose top-left cell is (i, j). The border is filled in
     the C code's order, which matters only when hb or wb is 1 (then raw energies leak through,
     as in the toolbox).
     """
-    n_orients, hb, wb = insensitive.shape
+    hb = hist.shape[1]
     norm = np.zeros((hb + 1, wb + 1), np.float32)
-    for o in range(n_orients):
+    for o in range(2 * n_orients, 3 * n_orients):
         for y in range(hb):
-            for x in range(wb):
-                value = insensitive[o, y, x]
+            for x in range(wb):  # plain indexing: a view per row would cost reference counts
+                value = hist[o, y, first + x]
                 norm[y + 1, x + 1] += value * value
     eps = np.float32(1e-4) / np.float32(4.0)
     for _ in range(4):
@@ -156,66 +163,59 @@ def _insensitive_sums(by_channel, n_orients):
 
 
 @njit(cache=True, nogil=True, fastmath=False, error_model="numpy")
-def _fhog_into(image, cell, n_orients, clip, bins, weights, out):
-    """fhog of one (H, W, C) image, each cell's values times `weights[y, x]`, into `out`
-    (>= 3n+4, H//cell, W//cell), channel-first, any strides (a channel-first slice of a
-    transform's input buffer, or a transposed view of a channel-last array); channels past
-    3n+4 (the toolbox's zero channel) are left as they are.
+def _cell_factor_planes(hist, n_orients, cell, sample_cells):
+    """The contrast-insensitive bins of a histogram of images side by side (`gradient_histogram`,
+    (3n, rows, N cols), `sample_cells` columns each), written into it, and the four block
+    normalisers of every cell as (4, rows, N cols) planes (`_cell_factors`), each image's
+    block normalisers its own."""
+    rows, columns = hist.shape[1], hist.shape[2]
+    _insensitive_sums(hist, n_orients)
+    factors = np.empty((4, rows, columns), np.float32)
+    for first in range(0, columns, sample_cells):
+        norm = _block_normalisers(hist, n_orients, first, sample_cells, cell)
+        _cell_factors(norm, factors, first)
+    return factors
+
+
+@njit(cache=True, nogil=True, fastmath=False, error_model="numpy")
+def _channel_last(channel_first, sample_weights, out):
+    """out[i, y, x, c] = channel_first[c, y, i cols + x] * sample_weights[i]: images side by
+    side, channel-first, as a channel-last stack, each image times its weight."""
+    count, rows, cols = out.shape[0], out.shape[1], out.shape[2]
+    channels = channel_first.shape[0]
+    for i in range(count):
+        target, weight = out[i], sample_weights[i]
+        for y in range(rows):
+            for x in range(cols):
+                for c in range(channels):
+                    target[y, x, c] = channel_first[c, y, i * cols + x] * weight
+
+
+def _normalised_cells(hist, n_orients, cell, sample_cells, clip, weights, out) -> None:
+    """The cells of a histogram (`_histogram`, the insensitive bins still zero) normalised, each
+    cell's values times `weights[y, x]`, into `out` (>= 3n+4, rows, cols), channel-first
+    (channels past 3n+4, the toolbox's zero channel, are left as they are): hogChannels.
 
     A float32 product rounds once wherever it is taken, so `out` holds exactly what the
     unweighted features times the weights would give (weights of one give the features).
     """
-    hb, wb = out.shape[1], out.shape[2]
-    if hb == 0 or wb == 0:
-        return
-    # The 2n sensitive bins then the n insensitive ones, channel-major (one plane per bin).
-    bins_by_channel = np.zeros((3 * n_orients, hb, wb), np.float32)
-    planes = planar_float32(image)
-    gradient_histogram(planes, cell, 2 * n_orients, bins, bins_by_channel, planes.shape[2], wb)
-    _insensitive_sums(bins_by_channel, n_orients)
-    factors = np.empty((4, hb, wb), np.float32)
-    _cell_factors(_block_normalisers(bins_by_channel[2 * n_orients :], cell), factors, 0)
-    _normalised_channels(bins_by_channel, n_orients, factors, clip, weights, out)
+    factors = _cell_factor_planes(hist, n_orients, cell, sample_cells)
+    _normalised_channels(hist, n_orients, factors, np.float32(clip), weights, out)
 
 
-@njit(cache=True, nogil=True, fastmath=False, error_model="numpy")
-def _fhog_batch_into(images, cell, n_orients, clip, bins, sample_weights, out):
-    """`_fhog_into` of each image into `out` (N, H//cell, W//cell, C), channel-last, all of
-    image i's values times `sample_weights[i]` (channels `_fhog_into` leaves stay zero).
-
-    The images are taken side by side, as one image N times as wide whose every image keeps
-    its own borders (`_gradient_histogram`), and normalised side by side too (each image's
-    block normalisers its own): the scale filter's 22 x 22 samples gave rows of 20 pixels and
-    5 cells."""
-    count, rows, cols, channels = out.shape
-    if count == 0 or rows == 0 or cols == 0:
-        out[:] = 0.0
-        return
-    height, width, colours = images.shape[1], images.shape[2], images.shape[3]
-    planes = np.empty((colours, height, count * width), np.float32)
-    for i in range(count):
-        sample = planar_float32(images[i])
-        for c in range(colours):
-            for y in range(height):
-                for x in range(width):
-                    planes[c, y, i * width + x] = sample[c, y, x]
-    side_by_side = np.zeros((3 * n_orients, rows, count * cols), np.float32)
-    gradient_histogram(planes, cell, 2 * n_orients, bins, side_by_side, width, cols)
-    _insensitive_sums(side_by_side, n_orients)
-    factors = np.empty((4, rows, count * cols), np.float32)
-    weights = np.empty((rows, count * cols), np.float32)
-    for i in range(count):
-        own = side_by_side[2 * n_orients :, :, i * cols : (i + 1) * cols]
-        _cell_factors(_block_normalisers(own, cell), factors, i * cols)
-        weights[:, i * cols : (i + 1) * cols] = sample_weights[i]
-    channel_first = np.zeros((channels, rows, count * cols), np.float32)
-    _normalised_channels(side_by_side, n_orients, factors, clip, weights, channel_first)
-    for i in range(count):
-        target = out[i]
-        for y in range(rows):
-            for x in range(cols):
-                for c in range(channels):
-                    target[y, x, c] = channel_first[c, y, i * cols + x]
+def _histogram(pixels: np.ndarray, cell: int, n_orients: int, cells: tuple[int, int]):
+    """The (3n, rows, N cols) histogram of the (N, H, W, C) images side by side, each image's
+    `cells` (rows, cols) of cells its own: `planar_float32`, `strongest_gradients` and
+    `gradient_histogram`, three kernels called one after the other (each compiled on its own:
+    a kernel that calls another recompiles the callee's code into its own)."""
+    count, _, width = pixels.shape[:3]
+    planes = planar_float32(pixels)
+    hist = np.zeros((3 * n_orients, cells[0], count * cells[1]), np.float32)
+    rows, cols = histogram_extent(hist.shape, cell, width, cells[1])
+    gradients = strongest_gradients(planes, rows, cols, width)
+    bins = orientation_bins(n_orients)
+    gradient_histogram(gradients, cell, 2 * n_orients, bins, hist, width, cells[1])
+    return hist
 
 
 def fhog(
@@ -235,16 +235,7 @@ def fhog(
         (height // cell_size, width // cell_size, fhog_channels(n_orients)), dtype=np.float32
     )
     weights = np.ones(out.shape[:2], np.float32)
-    bins = orientation_bins(int(n_orients))
-    _fhog_into(
-        pixels,
-        int(cell_size),
-        int(n_orients),
-        np.float32(clip),
-        bins,
-        weights,
-        out.transpose(2, 0, 1),
-    )
+    _fhog_into(pixels, int(cell_size), int(n_orients), clip, weights, out.transpose(2, 0, 1))
     return out
 
 
@@ -269,8 +260,7 @@ def fhog_weighted_into(
             f"fhog of a {pixels.shape[0]} x {pixels.shape[1]} image at cell {cell_size} needs "
             f"weights {cells} and out {shape}, got {weights.shape} and {out.shape}"
         )
-    bins = orientation_bins(int(n_orients))
-    _fhog_into(pixels, int(cell_size), int(n_orients), np.float32(clip), bins, weights, out)
+    _fhog_into(pixels, int(cell_size), int(n_orients), clip, weights, out)
 
 
 def fhog_batch(
@@ -302,7 +292,27 @@ def fhog_batch(
         if weights.shape != (count,):
             raise InputError(f"fhog_batch needs {count} sample weights, got {weights.shape}")
         channels -= FHOG_TRUNCATION_CHANNELS
-    out = np.empty((count, height // cell_size, width // cell_size, channels), np.float32)
-    bins = orientation_bins(int(n_orients))
-    _fhog_batch_into(pixels, int(cell_size), int(n_orients), np.float32(clip), bins, weights, out)
+    out = np.zeros((count, height // cell_size, width // cell_size, channels), np.float32)
+    if out.size:  # normalised side by side, then each image's cells times its weight
+        rows, cols = out.shape[1:3]
+        hist = _histogram(pixels, int(cell_size), int(n_orients), (rows, cols))
+        channel_first = np.empty((fhog_channels(n_orients) - 1, rows, count * cols), np.float32)
+        ones = np.ones((rows, count * cols), np.float32)  # (v * 1) * w is v * w, bit for bit
+        _normalised_cells(hist, int(n_orients), int(cell_size), cols, clip, ones, channel_first)
+        _channel_last(channel_first, weights, out)
     return out
+
+
+def _fhog_into(
+    pixels: np.ndarray,
+    cell: int,
+    n_orients: int,
+    clip: float,
+    weights: np.ndarray,
+    out: np.ndarray,
+) -> None:
+    """fhog of one (H, W, C) image times `weights` into `out` (>= 3n+4, H//cell, W//cell),
+    channel-first, any strides (`_normalised_cells`)."""
+    if out.shape[1] and out.shape[2]:
+        hist = _histogram(pixels[None], cell, n_orients, out.shape[1:])
+        _normalised_cells(hist, n_orients, cell, out.shape[2], clip, weights, out)

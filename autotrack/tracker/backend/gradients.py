@@ -25,26 +25,33 @@ ACOS_OFFSET = ACOS_STEPS + ACOS_PAD
 
 
 @njit(cache=True, nogil=True, fastmath=False, error_model="numpy")
-def planar_float32(image):
-    """(H, W, C) of any real dtype -> C-contiguous float32 (C, H, W), as `single(I)` does."""
-    height, width, channels = image.shape
-    planes = np.empty((channels, height, width), np.float32)
+def planar_float32(images):
+    """(N, H, W, C) of any real dtype -> C-contiguous float32 (C, H, N W), as `single(I)` does,
+    the N images side by side (one image: N = 1)."""
+    count, height, width, channels = images.shape
+    planes = np.empty((channels, height, count * width), np.float32)
     if channels == 3:  # the common RGB case, written so that LLVM vectorises the deinterleave
-        flat = image.reshape(height, width * 3)
-        for y in range(height):
-            row = flat[y]
-            red, green, blue = planes[0, y], planes[1, y], planes[2, y]
-            for x in range(width):
-                red[x] = np.float32(row[3 * x])
-                green[x] = np.float32(row[3 * x + 1])
-                blue[x] = np.float32(row[3 * x + 2])
-    else:
-        for y in range(height):
-            for c in range(channels):
-                source = image[y, :, c]
-                target = planes[c, y]
+        flat = images.reshape(count, height, width * 3)
+        for i in range(count):
+            first = i * width
+            for y in range(height):
+                row = flat[i, y]
+                red = planes[0, y, first : first + width]
+                green = planes[1, y, first : first + width]
+                blue = planes[2, y, first : first + width]
                 for x in range(width):
-                    target[x] = np.float32(source[x])
+                    red[x] = np.float32(row[3 * x])
+                    green[x] = np.float32(row[3 * x + 1])
+                    blue[x] = np.float32(row[3 * x + 2])
+    else:
+        for i in range(count):
+            first = i * width
+            for y in range(height):
+                for c in range(channels):
+                    source = images[i, y, :, c]
+                    target = planes[c, y, first : first + width]
+                    for x in range(width):
+                        target[x] = np.float32(source[x])
     return planes
 
 
@@ -96,45 +103,65 @@ def _stronger(best, best_x, best_y, candidate_x, candidate_y):
     return best, best_x, best_y
 
 
-@njit(cache=True, nogil=True, fastmath=False, error_model="numpy")
-def strongest_gradients(planes, rows, cols, sample_width):
+def strongest_gradients(planes: np.ndarray, rows: int, cols: int, sample_width: int) -> np.ndarray:
     """gradMag's choice of channel: per pixel of the first `rows` x `cols`, the x and y
     gradients of the channel with the largest squared magnitude (a later channel only if
-    strictly larger) and that magnitude, as three float32 (rows, cols) arrays.
+    strictly larger) and that magnitude, as one float32 (3, rows, cols) array.
 
     Three channels (RGB, the usual case) choose in registers and store every element once; other
     counts choose into scratch rows and copy back. Neither updates a running best in place:
     LLVM reads `gx[x] = cx if larger else gx[x]` as a store only where `larger` holds and
     vectorises it with masked stores (vmaskmovps), which AMD's Zen cores run at a fraction of a
     plain store's rate (1.5x slower on RGB search patches; `benchmarks/kernel_asm.py` lists any
-    kernel that has them). The comparisons and products are the same throughout. The
-    whole image in one call: a call a row cost more than the work on the scale filter's small
-    samples. A grey image has no choice to make and is not passed (`rows` = 0). Images side by
-    side, `sample_width` columns each, take their gradients as `row_gradients` does.
+    kernel that has them). The comparisons and products are the same throughout. The two are
+    kernels of their own: a video compiles only the one its frames need. The whole image in
+    one call: a call a row cost more than the work on the scale filter's small
+    samples. A grey image has no choice to make: its gradients and their squared magnitude.
+    Images side by side, `sample_width` columns each, take their gradients as `row_gradients`
+    does.
     """
+    if planes.shape[0] == 3:
+        return _rgb_gradients(planes, rows, cols, sample_width)
+    return _any_channel_gradients(planes, rows, cols, sample_width)
+
+
+@njit(cache=True, nogil=True, fastmath=False, error_model="numpy")
+def _rgb_gradients(planes, rows, cols, sample_width):
+    """`strongest_gradients` of three planes: the choice in registers."""
+    gradients = np.empty((3, rows, cols), np.float32)
+    gx, gy, squared = gradients[0], gradients[1], gradients[2]
+    scratch = np.empty((6, cols), np.float32)  # one row's x and y gradients of each channel
+    gx0, gy0, gx1, gy1 = scratch[0], scratch[1], scratch[2], scratch[3]
+    gx2, gy2 = scratch[4], scratch[5]
+    for y in range(rows):
+        row_gx, row_gy, row_squared = gx[y], gy[y], squared[y]
+        row_gradients(planes[0], y, gx0, gy0, sample_width)
+        row_gradients(planes[1], y, gx1, gy1, sample_width)
+        row_gradients(planes[2], y, gx2, gy2, sample_width)
+        for x in range(cols):
+            best_x, best_y = gx0[x], gy0[x]
+            best = best_x * best_x + best_y * best_y
+            best, best_x, best_y = _stronger(best, best_x, best_y, gx1[x], gy1[x])
+            best, best_x, best_y = _stronger(best, best_x, best_y, gx2[x], gy2[x])
+            row_squared[x], row_gx[x], row_gy[x] = best, best_x, best_y
+    return gradients
+
+
+@njit(cache=True, nogil=True, fastmath=False, error_model="numpy")
+def _any_channel_gradients(planes, rows, cols, sample_width):
+    """`strongest_gradients` of any number of planes: the first channel's gradients, then each
+    later channel's choice into scratch rows, copied back (a grey image: its gradients)."""
     channels = planes.shape[0]
     gradients = np.empty((3, rows, cols), np.float32)
     gx, gy, squared = gradients[0], gradients[1], gradients[2]
-    scratch = np.empty((7, cols), np.float32)  # one row's x and y gradients of each channel
-    gx0, gy0, gx1, gy1 = scratch[0], scratch[1], scratch[2], scratch[3]
-    gx2, gy2, chosen_squared = scratch[4], scratch[5], scratch[6]
+    scratch = np.empty((5, cols), np.float32)  # a channel's row, then the chosen values
+    gx0, gy0, gx1, gy1, chosen_squared = scratch[0], scratch[1], scratch[2], scratch[3], scratch[4]
     for y in range(rows):
         row_gx, row_gy, row_squared = gx[y], gy[y], squared[y]
-        if channels == 3:
-            row_gradients(planes[0], y, gx0, gy0, sample_width)
-            row_gradients(planes[1], y, gx1, gy1, sample_width)
-            row_gradients(planes[2], y, gx2, gy2, sample_width)
-            for x in range(cols):
-                best_x, best_y = gx0[x], gy0[x]
-                best = best_x * best_x + best_y * best_y
-                best, best_x, best_y = _stronger(best, best_x, best_y, gx1[x], gy1[x])
-                best, best_x, best_y = _stronger(best, best_x, best_y, gx2[x], gy2[x])
-                row_squared[x], row_gx[x], row_gy[x] = best, best_x, best_y
-            continue
         row_gradients(planes[0], y, row_gx, row_gy, sample_width)
         for x in range(cols):
             row_squared[x] = row_gx[x] * row_gx[x] + row_gy[x] * row_gy[x]
-        for c in range(1, channels):  # another count: the choice into scratch, then copied
+        for c in range(1, channels):
             row_gradients(planes[c], y, gx0, gy0, sample_width)
             for x in range(cols):
                 chosen_squared[x], gx1[x], gy1[x] = _stronger(
@@ -144,7 +171,7 @@ def strongest_gradients(planes, rows, cols, sample_width):
                 row_squared[x] = chosen_squared[x]
                 row_gx[x] = gx1[x]
                 row_gy[x] = gy1[x]
-    return gx, gy, squared
+    return gradients
 
 
 @njit(cache=True, nogil=True, fastmath=False, error_model="numpy")
@@ -219,19 +246,28 @@ def _scatter_row(
                 flat[np.uint64(at + 1)] += w01 * m
 
 
+def histogram_extent(hist_shape, cell, sample_width, sample_cells):
+    """The pixel rows and columns `gradient_histogram` bins for a (bins, hb, wb) histogram of
+    images side by side (`sample_width` pixel and `sample_cells` cell columns each): the
+    gradients `strongest_gradients` computes for it."""
+    hb, wb = hist_shape[1], hist_shape[2]
+    samples = wb // sample_cells
+    return hb * cell, (samples - 1) * sample_width + sample_cells * cell
+
+
 @njit(cache=True, nogil=True, fastmath=False, error_model="numpy")
-def gradient_histogram(planes, cell, n_bins, bins, hist, sample_width, sample_cells):
+def gradient_histogram(gradients, cell, n_bins, bins, hist, sample_width, sample_cells):
     """gradMag (full orientation) + gradHist(softBin=-1): bilinear in space, hard in angle.
 
-    `planes` is float32 (C, H, W), `bins` `orientation_bins(n_bins // 2)`, `hist` C-contiguous
-    (>= n_bins, hb, wb), channel-major: a pixel's right cell is the next float, not n_bins on.
-    `planes` may hold several images side by side, `sample_width` columns each, whose
-    histograms `hist` then holds side by side, `sample_cells` columns each (one image: its
+    `gradients` is `strongest_gradients` of the image (gx, gy and squared magnitude, float32
+    (3, rows, cols) for `histogram_extent`), `bins` `orientation_bins(n_bins // 2)`, `hist`
+    C-contiguous zeros (>= n_bins, hb, wb), channel-major: a pixel's right cell is the next
+    float, not n_bins on. The image may be several side by side, `sample_width` columns each,
+    whose histograms `hist` then holds side by side, `sample_cells` columns each (one image: its
     width and wb): each image's gradients, cells and borders are its own, and every cell sums
     its pixels in the same order as for the image alone, so the same bits; the rows of all
     the images run as one long row.
-    The colour channel is chosen for the whole image first (`strongest_gradients`), then row by
-    row in small vectorisable passes, branch-free where the data decide (random gradient
+    Row by row in small vectorisable passes, branch-free where the data decide (random gradient
     signs would defeat branch prediction); the scatter indexes the flat histogram with unsigned
     indices (no negative-index wraparound code per access).
     """
@@ -245,25 +281,13 @@ def gradient_histogram(planes, cell, n_bins, bins, hist, sample_width, sample_ce
     cols = (samples - 1) * sample_width + used
     x_first, x_frac = _bin_coordinates(used, cell)
     y_first, y_frac = _bin_coordinates(rows, cell)
-    channels = planes.shape[0]
-    grey_row = np.empty((3, cols), np.float32)  # a grey row's gx, gy and squared
-    row_gx, row_gy, row_squared = grey_row[0], grey_row[1], grey_row[2]
-    image_gx, image_gy, image_squared = strongest_gradients(
-        planes, rows if channels > 1 else 0, cols, sample_width
-    )
     table_index = np.empty(cols, np.uint32)
     weight = np.empty(cols, np.float32)
     orient = np.empty(cols, np.int64)
     flat = hist.reshape(-1)
     plane = hb * wb
     for y in range(rows):
-        if channels == 1:  # no choice to make: the row's gradients, kept in cache
-            gx, gy, squared = row_gx, row_gy, row_squared
-            row_gradients(planes[0], y, gx, gy, sample_width)
-            for x in range(cols):
-                squared[x] = gx[x] * gx[x] + gy[x] * gy[x]
-        else:
-            gx, gy, squared = image_gx[y], image_gy[y], image_squared[y]
+        gx, gy, squared = gradients[0, y], gradients[1, y], gradients[2, y]
         for x in range(cols):
             magnitude = np.float32(math.sqrt(squared[x]))
             inverse = min(_ONE / magnitude, _ZERO_GRADIENT_INVERSE)
