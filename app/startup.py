@@ -2,7 +2,7 @@
 tracker's kernels compiled (or loaded from numba's cache) in a background thread, with a
 notice every tab shows, with the seconds elapsed, until it is done.
 
-A first run on a machine compiles every kernel (~20 s on a quiet 2-core machine, two minutes
+A first run on a machine compiles every kernel (~12 s on a quiet 2-core machine, up to a minute
 on a busy one); later starts load them from numba's cache in about a second. A box drawn
 meanwhile waits for the compiler, so the page says so instead of showing a bare spinner.
 """
@@ -17,7 +17,7 @@ from autotrack.tracker.parallel.warmup import warm_up
 
 TICK_SECONDS = 1.0
 """How often the notice's elapsed time is shown again."""
-FIRST_RUN_SECONDS = "~20-120 s"
+FIRST_RUN_SECONDS = "~12-60 s"
 """What a first run's compilation takes (a quiet 2-core machine to a busy one)."""
 
 

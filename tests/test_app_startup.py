@@ -29,7 +29,7 @@ def test_the_notice_counts_the_seconds_until_the_kernels_are_ready() -> None:
     warm_up = KernelWarmUp(release.wait, clock)
     stop = warm_up.subscribe(shown.append)
     assert warm_up.running and "compiling its kernels… 0 s so far" in shown[-1]
-    assert "~20-120 s" in shown[-1] and "12 s so far" not in warm_up.box_wait()
+    assert "~12-60 s" in shown[-1] and "12 s so far" not in warm_up.box_wait()
     clock.now += 12.0
     _wait_for(lambda: "12 s so far" in shown[-1], timeout=10)  # ticked once a second
     assert "12 s so far" in warm_up.box_wait()
