@@ -89,6 +89,35 @@ def test_fast_training_and_detection_equal_the_reference(dataset, name):
             )
 
 
+@pytest.mark.parametrize("grid_size", [(12, 12), (12, 13), (9, 10)])
+def test_h_step_projection_by_row_bands_equals_the_full_transforms(grid_size):
+    # The fast h-step transforms along the columns only the band of rows where the gain varies;
+    # the gains: a target-region band (the faithful window's), one value per row (none
+    # varies), one value throughout, and varying everywhere. Spectra not of real maps, so
+    # the imaginary parts the real inverse ignores (zero and Nyquist columns) are not zero.
+    rows, cols = grid_size
+    rng = np.random.default_rng(11)
+    shape = (3, rows, cols // 2 + 1)
+    band = np.full(grid_size, 2.5e-7, np.float32)
+    band[4:7, 3:8] = rng.uniform(0.1, 1.0, (3, 5))
+    gains = (
+        band,
+        np.repeat(rng.uniform(0.1, 1.0, (rows, 1)), cols, axis=1).astype(np.float32),
+        np.full(grid_size, 0.5, np.float32),
+        rng.uniform(0.1, 1.0, grid_size).astype(np.float32),
+    )
+    transform = fast_dcf.SpectrumTransform(shape[0], grid_size)
+    for gain in gains:
+        spectrum = (rng.standard_normal(shape) + 1j * rng.standard_normal(shape)).astype(
+            np.complex64
+        )
+        expected = dcf.to_spectrum(gain * dcf.from_spectrum(spectrum, grid_size))
+        transform.h_step_input[:] = spectrum
+        projected = transform.project_input(gain)
+        assert projected.dtype == np.complex64 and projected.shape == shape
+        np.testing.assert_allclose(projected, expected, rtol=0, atol=1e-5 * np.abs(expected).max())
+
+
 @needs_sequences
 @pytest.mark.parametrize(("dataset", "name"), SEQUENCES)
 def test_fast_patches_and_features_equal_the_reference(dataset, name):

@@ -6,6 +6,7 @@ import math
 from collections.abc import Callable
 
 import numpy as np
+import scipy.linalg
 
 from autotrack.tracker.dcf import half_spectrum_weights
 
@@ -80,7 +81,18 @@ def global_variation(variation: np.ndarray) -> float:
     singular value); inf when Pi has non-finite entries (a blow-up counts as an aberrance)."""
     if not np.isfinite(variation).all():
         return math.inf
-    return float(np.linalg.norm(variation.astype(np.float64), ord=2)) * GLOBAL_VARIATION_SCALE
+    return spectral_norm(variation.astype(np.float64)) * GLOBAL_VARIATION_SCALE
+
+
+def spectral_norm(matrix: np.ndarray) -> float:
+    """The largest singular value of a real float64 matrix: the square root of the largest
+    eigenvalue of its Gram matrix, which LAPACK's dsyevr finds alone (the value of
+    `np.linalg.norm(matrix, ord=2)` to ~1e-15 relative, at half the time of its full SVD on a
+    50 x 50 variation map)."""
+    gram = matrix.T @ matrix if matrix.shape[0] >= matrix.shape[1] else matrix @ matrix.T
+    size = gram.shape[0]
+    largest = scipy.linalg.lapack.dsyevr(gram, compute_v=0, range="I", il=size, iu=size)[0][0]
+    return math.sqrt(max(float(largest), 0.0))
 
 
 def temporal_reference(eta: float, zeta: float, nu: float) -> float:
