@@ -18,8 +18,14 @@ import pytest
 from autotrack import AutoTrack, preset
 from autotrack.evaluation.datasets import load_otb_sequence
 from autotrack.io.frames import read_image
-from autotrack.tracker import dcf, features, sampling
-from autotrack.tracker.backend import ReferenceBackend, fast_dcf, fast_features, fast_sampling
+from autotrack.tracker import dcf, features, regularization, sampling
+from autotrack.tracker.backend import (
+    ReferenceBackend,
+    fast_dcf,
+    fast_features,
+    fast_regularization,
+    fast_sampling,
+)
 from autotrack.tracker.backend.fast import FastBackend
 from tests.conftest import (
     COLOUR_TABLE,
@@ -87,6 +93,31 @@ def test_fast_training_and_detection_equal_the_reference(dataset, name):
                 rtol=1e-6,
                 atol=1e-6,
             )
+
+
+@needs_sequences
+@pytest.mark.parametrize(("dataset", "name"), SEQUENCES)
+def test_fast_local_variation_equals_the_reference(dataset, name):
+    # Consecutive real responses with their sub-pixel peaks (eq. 2), bit for bit; then maps
+    # with zeros in the previous response (inf and NaN entries) and peaks that wrap around.
+    _, detections, _, tracker = _recorded_run(dataset, name, 6)
+    responses = [dcf.detection_response(g_f, zf, tracker.grid_size) for g_f, zf in detections]
+    peaks = [dcf.newton_peak(response, 5)[:2] for response in responses]
+    rng = np.random.default_rng(2)
+    previous = rng.standard_normal((9, 12)).astype(np.float32)
+    previous[0, :3] = 0.0
+    current = rng.standard_normal((9, 12)).astype(np.float32)
+    current[0, 1] = 0.0
+    cases = [
+        (responses[i], peaks[i], responses[i - 1], peaks[i - 1]) for i in range(1, len(responses))
+    ]
+    cases += [(current, (-4.6, 11.2), previous, (3.5, -0.2)), (current, (0, 0), previous, (0, 0))]
+    for response, peak, previous_response, previous_peak in cases:
+        fast = fast_regularization.local_variation(response, peak, previous_response, previous_peak)
+        reference = regularization.local_variation(response, peak, previous_response, previous_peak)
+        assert fast.dtype == reference.dtype == np.float32
+        assert np.array_equal(fast, reference, equal_nan=True)
+    assert not np.isfinite(fast).all()
 
 
 @pytest.mark.parametrize("grid_size", [(12, 12), (12, 13), (9, 10)])

@@ -67,13 +67,17 @@ def centred_alignment(
 ) -> tuple[np.ndarray, np.ndarray]:
     """Both maps circularly shifted by minus their floored peak and then by half the map, so the
     peaks meet at the centre (eq. 2's alignment, and the release's centring, in one roll)."""
-    centre = (response.shape[0] // 2, response.shape[1] // 2)
 
     def roll(values: np.ndarray, peak: tuple[float, float]) -> np.ndarray:
-        shift = (centre[0] - math.floor(peak[0]), centre[1] - math.floor(peak[1]))
-        return np.roll(values, shift, axis=(0, 1))
+        return np.roll(values, centring_shift(values.shape, peak), axis=(0, 1))
 
     return roll(response, displacement), roll(previous_response, previous_displacement)
+
+
+def centring_shift(shape: tuple[int, ...], peak: tuple[float, float]) -> tuple[int, int]:
+    """The (rows, cols) circular shift that moves a map's floored peak displacement to the
+    centre of the map (`centred_alignment`'s roll)."""
+    return shape[0] // 2 - math.floor(peak[0]), shape[1] // 2 - math.floor(peak[1])
 
 
 def global_variation(variation: np.ndarray) -> float:
