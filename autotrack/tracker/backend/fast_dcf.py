@@ -78,11 +78,11 @@ class SpectrumTransform:
         first, stop = _varying_rows(gain)
         band = scipy.fft.irfft(spectrum[:, first:stop], n=cols, axis=-1, workers=1)
         band *= gain[first:stop]
-        for rows in (slice(0, first), slice(stop, None)):
-            spectrum[:, rows] *= gain[rows, :1]
-            spectrum[:, rows, 0].imag = 0.0
-            if cols % 2 == 0:
-                spectrum[:, rows, cols // 2].imag = 0.0
+        # Every row as a row of one gain value; the band's rows are then replaced.
+        spectrum *= gain[:, :1]
+        spectrum[..., 0].imag = 0.0
+        if cols % 2 == 0:
+            spectrum[..., cols // 2].imag = 0.0
         spectrum[:, first:stop] = scipy.fft.rfft(band, axis=-1, workers=1)
         return scipy.fft.fft(spectrum, axis=-2, workers=1)
 
