@@ -18,8 +18,14 @@ import pytest
 from autotrack import AutoTrack, preset
 from autotrack.evaluation.datasets import load_otb_sequence
 from autotrack.io.frames import read_image
-from autotrack.tracker import dcf, features, sampling
-from autotrack.tracker.backend import ReferenceBackend, fast_dcf, fast_features, fast_sampling
+from autotrack.tracker import dcf, features, regularization, sampling
+from autotrack.tracker.backend import (
+    ReferenceBackend,
+    fast_dcf,
+    fast_features,
+    fast_regularization,
+    fast_sampling,
+)
 from autotrack.tracker.backend.fast import FastBackend
 from tests.conftest import (
     COLOUR_TABLE,
@@ -87,6 +93,60 @@ def test_fast_training_and_detection_equal_the_reference(dataset, name):
                 rtol=1e-6,
                 atol=1e-6,
             )
+
+
+@needs_sequences
+@pytest.mark.parametrize(("dataset", "name"), SEQUENCES)
+def test_fast_local_variation_equals_the_reference(dataset, name):
+    # Consecutive real responses with their sub-pixel peaks (eq. 2), bit for bit; then maps
+    # with zeros in the previous response (inf and NaN entries) and peaks that wrap around.
+    _, detections, _, tracker = _recorded_run(dataset, name, 6)
+    responses = [dcf.detection_response(g_f, zf, tracker.grid_size) for g_f, zf in detections]
+    peaks = [dcf.newton_peak(response, 5)[:2] for response in responses]
+    rng = np.random.default_rng(2)
+    previous = rng.standard_normal((9, 12)).astype(np.float32)
+    previous[0, :3] = 0.0
+    current = rng.standard_normal((9, 12)).astype(np.float32)
+    current[0, 1] = 0.0
+    cases = [
+        (responses[i], peaks[i], responses[i - 1], peaks[i - 1]) for i in range(1, len(responses))
+    ]
+    cases += [(current, (-4.6, 11.2), previous, (3.5, -0.2)), (current, (0, 0), previous, (0, 0))]
+    for response, peak, previous_response, previous_peak in cases:
+        fast = fast_regularization.local_variation(response, peak, previous_response, previous_peak)
+        reference = regularization.local_variation(response, peak, previous_response, previous_peak)
+        assert fast.dtype == reference.dtype == np.float32
+        assert np.array_equal(fast, reference, equal_nan=True)
+    assert not np.isfinite(fast).all()
+
+
+@pytest.mark.parametrize("grid_size", [(12, 12), (12, 13), (9, 10)])
+def test_h_step_projection_by_row_bands_equals_the_full_transforms(grid_size):
+    # The fast h-step transforms along the columns only the band of rows where the gain varies;
+    # the gains: a target-region band (the faithful window's), one value per row (none
+    # varies), one value throughout, and varying everywhere. Spectra not of real maps, so
+    # the imaginary parts the real inverse ignores (zero and Nyquist columns) are not zero.
+    rows, cols = grid_size
+    rng = np.random.default_rng(11)
+    shape = (3, rows, cols // 2 + 1)
+    band = np.full(grid_size, 2.5e-7, np.float32)
+    band[4:7, 3:8] = rng.uniform(0.1, 1.0, (3, 5))
+    gains = (
+        band,
+        np.repeat(rng.uniform(0.1, 1.0, (rows, 1)), cols, axis=1).astype(np.float32),
+        np.full(grid_size, 0.5, np.float32),
+        rng.uniform(0.1, 1.0, grid_size).astype(np.float32),
+    )
+    transform = fast_dcf.SpectrumTransform(shape[0], grid_size)
+    for gain in gains:
+        spectrum = (rng.standard_normal(shape) + 1j * rng.standard_normal(shape)).astype(
+            np.complex64
+        )
+        expected = dcf.to_spectrum(gain * dcf.from_spectrum(spectrum, grid_size))
+        transform.h_step_input[:] = spectrum
+        projected = transform.project_input(gain)
+        assert projected.dtype == np.complex64 and projected.shape == shape
+        np.testing.assert_allclose(projected, expected, rtol=0, atol=1e-5 * np.abs(expected).max())
 
 
 @needs_sequences

@@ -184,6 +184,17 @@ def test_global_variation_of_edge_cases():
         assert regularization.global_variation(matrix) == math.inf
 
 
+def test_spectral_norm_is_the_largest_singular_value():
+    # The Gram matrix's largest eigenvalue, against LAPACK's SVD: square, tall and wide maps
+    # of variation-like (non-negative, wide-ranging) values.
+    rng = np.random.default_rng(5)
+    for shape in ((50, 50), (50, 31), (23, 50), (1, 9), (9, 1)):
+        for _ in range(20):
+            matrix = np.abs(rng.standard_normal(shape)) * rng.uniform(1e-3, 1e3)
+            expected = np.linalg.norm(matrix, ord=2)
+            assert regularization.spectral_norm(matrix) == pytest.approx(expected, rel=1e-14)
+
+
 def test_multiplier_update_and_gamma_schedule():
     settings = dcf.AdmmSettings(4, 1.0, 1.0, 10.0, 10000.0)
     gammas = [1.0]

@@ -92,8 +92,11 @@ def weighted_refinement(
     weights.
 
     `scipy.optimize.least_squares(method="lm", xtol=1e-12, ftol=1e-12, x_scale="jac")` (MINPACK's
-    lmder: gtol 1e-8, at most 100 n evaluations). One projection serves both the residuals and
-    the Jacobian at a point (MINPACK asks for the Jacobian at the point it has just evaluated).
+    lmder: gtol 1e-8, at most 100 n evaluations), called as `scipy.optimize.leastsq`, the same
+    lmder call with those settings (the same pose to the bit, tests/test_pnp_refine.py) without
+    least_squares' wrapping of the functions (~0.1 ms a call). One projection serves both the
+    residuals and the Jacobian at a point (MINPACK asks for the Jacobian at the point it has just
+    evaluated).
     """
     scale = np.repeat(np.sqrt(np.asarray(weights, dtype=np.float64)), 2)
     projection = _CachedProjection(camera, object_points)
@@ -109,11 +112,11 @@ def weighted_refinement(
     start = np.asarray(start, dtype=np.float64).flatten()  # a copy: MINPACK works in place
     if residuals(start).size < start.size:
         raise InputError(f"a pose refinement needs at least 3 points, got {len(image_points)}")
-    from scipy.optimize import least_squares  # ~0.45 s to import: only when weights differ
+    from scipy.optimize import leastsq  # ~0.45 s to import: only when weights differ
 
-    solution = least_squares(
-        residuals, start, jac=jacobian, method="lm", xtol=1e-12, ftol=1e-12, x_scale="jac"
-    ).x
+    solution = leastsq(
+        residuals, start, Dfun=jacobian, xtol=1e-12, ftol=1e-12, gtol=1e-8, maxfev=100 * start.size
+    )[0]
     return np.asarray(solution, dtype=np.float64)
 
 

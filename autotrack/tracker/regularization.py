@@ -6,6 +6,7 @@ import math
 from collections.abc import Callable
 
 import numpy as np
+import scipy.linalg
 
 from autotrack.tracker.dcf import half_spectrum_weights
 
@@ -66,13 +67,17 @@ def centred_alignment(
 ) -> tuple[np.ndarray, np.ndarray]:
     """Both maps circularly shifted by minus their floored peak and then by half the map, so the
     peaks meet at the centre (eq. 2's alignment, and the release's centring, in one roll)."""
-    centre = (response.shape[0] // 2, response.shape[1] // 2)
 
     def roll(values: np.ndarray, peak: tuple[float, float]) -> np.ndarray:
-        shift = (centre[0] - math.floor(peak[0]), centre[1] - math.floor(peak[1]))
-        return np.roll(values, shift, axis=(0, 1))
+        return np.roll(values, centring_shift(values.shape, peak), axis=(0, 1))
 
     return roll(response, displacement), roll(previous_response, previous_displacement)
+
+
+def centring_shift(shape: tuple[int, ...], peak: tuple[float, float]) -> tuple[int, int]:
+    """The (rows, cols) circular shift that moves a map's floored peak displacement to the
+    centre of the map (`centred_alignment`'s roll)."""
+    return shape[0] // 2 - math.floor(peak[0]), shape[1] // 2 - math.floor(peak[1])
 
 
 def global_variation(variation: np.ndarray) -> float:
@@ -80,7 +85,18 @@ def global_variation(variation: np.ndarray) -> float:
     singular value); inf when Pi has non-finite entries (a blow-up counts as an aberrance)."""
     if not np.isfinite(variation).all():
         return math.inf
-    return float(np.linalg.norm(variation.astype(np.float64), ord=2)) * GLOBAL_VARIATION_SCALE
+    return spectral_norm(variation.astype(np.float64)) * GLOBAL_VARIATION_SCALE
+
+
+def spectral_norm(matrix: np.ndarray) -> float:
+    """The largest singular value of a real float64 matrix: the square root of the largest
+    eigenvalue of its Gram matrix, which LAPACK's dsyevr finds alone (the value of
+    `np.linalg.norm(matrix, ord=2)` to ~1e-15 relative, at half the time of its full SVD on a
+    50 x 50 variation map)."""
+    gram = matrix.T @ matrix if matrix.shape[0] >= matrix.shape[1] else matrix @ matrix.T
+    size = gram.shape[0]
+    largest = scipy.linalg.lapack.dsyevr(gram, compute_v=0, range="I", il=size, iu=size)[0][0]
+    return math.sqrt(max(float(largest), 0.0))
 
 
 def temporal_reference(eta: float, zeta: float, nu: float) -> float:

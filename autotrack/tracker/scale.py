@@ -140,13 +140,17 @@ class ScaleFilter:
         else:
             samples_f = half_spectrum(samples)
         # DSST's running average: A <- (1 - rate) A + rate y conj(S), B <- (1 - rate) B +
-        # rate sum_d |S_d|^2 (the new terms alone on the first frame), per scale.
-        numerator = self.label_f[: samples_f.shape[0], None] * np.conj(samples_f)
+        # rate sum_d |S_d|^2 (the new terms alone on the first frame), per scale; the products
+        # taken in place (the same roundings as the expressions written out).
+        numerator = np.conj(samples_f)
+        np.multiply(self.label_f[: samples_f.shape[0], None], numerator, out=numerator)
         denominator = np.sum(samples_f.real**2 + samples_f.imag**2, axis=1)
         if self._numerator is None:
             self._numerator, self._denominator = numerator, denominator
             return
         rate = np.float32(self.params.scale_learning_rate)
         keep = np.float32(1.0) - rate
-        self._numerator = keep * self._numerator + rate * numerator
+        numerator *= rate
+        self._numerator *= keep
+        self._numerator += numerator
         self._denominator = keep * self._denominator + rate * denominator

@@ -215,7 +215,7 @@ class AutoTrack:
         theta_ref = p.zeta if p.adaptive_temporal else p.fixed_theta
         if self.frame_number > 2 and self.previous_response is not None:
             peaks = (displacement, self.previous_response, self.previous_displacement)
-            variation = regularization.local_variation(response, *peaks)
+            variation = self.backend.local_variation(response, *peaks)
             eta = regularization.global_variation(variation)
             if p.adaptive_temporal:
                 aberrant = regularization.is_aberrant(eta, p.phi)

@@ -3,8 +3,8 @@
 - `ReferenceBackend`: the plain definitions (`tracker.sampling`, `tracker.features`,
   `tracker.fhog`, `tracker.dcf`): numpy, scipy.fft and OpenCV. It is the definition of correct.
 - `FastBackend` (the default): the same steps in numba kernels (`fast_sampling`,
-  `fast_features`, `fast_fhog`, `fast_dcf`), each tested against the reference
-  (tests/test_backend.py); ~10x faster, never needed for a correct result.
+  `fast_features`, `fast_fhog`, `fast_dcf`, `fast_regularization`), each tested against the
+  reference (tests/test_backend.py); ~10x faster, never needed for a correct result.
 
 `TrackerParams.backend` chooses; `make_backend` builds one per tracker (the fast one keeps its
 training buffers between frames).
@@ -17,12 +17,13 @@ from typing import Protocol
 import numpy as np
 
 from autotrack.params import TrackerParams
-from autotrack.tracker import dcf, features, sampling
+from autotrack.tracker import dcf, features, regularization, sampling
 from autotrack.tracker.dcf import admm_settings
 
 
 class Backend(Protocol):
-    """The steps of a frame that cost time: sampling, features, training, detection."""
+    """The steps of a frame that cost time: sampling, features, training, detection, the
+    response variation."""
 
     name: str
     params: TrackerParams
@@ -51,6 +52,11 @@ class Backend(Protocol):
     def peak(self, response: np.ndarray, iterations: int) -> tuple[float, float, float]:
         """The sub-pixel peak (`dcf.newton_peak`)."""
 
+    def local_variation(
+        self, response, displacement, previous_response, previous_displacement
+    ) -> np.ndarray:
+        """The local response variation of eq. 2 (`regularization.local_variation`)."""
+
 
 class ReferenceBackend:
     """The plain numpy / scipy.fft / OpenCV definitions of every step."""
@@ -65,6 +71,7 @@ class ReferenceBackend:
     sized_patches = staticmethod(sampling.sized_patches)
     scale_features = staticmethod(features.scale_features)
     peak = staticmethod(dcf.newton_peak)
+    local_variation = staticmethod(regularization.local_variation)
 
     def feature_maps(self, patch: np.ndarray) -> np.ndarray:
         return features.feature_maps(patch, self.params, self.colour_table)

@@ -5,7 +5,12 @@ from __future__ import annotations
 import numpy as np
 
 from autotrack.params import TrackerParams
-from autotrack.tracker.backend import fast_dcf, fast_features, fast_sampling
+from autotrack.tracker.backend import (
+    fast_dcf,
+    fast_features,
+    fast_regularization,
+    fast_sampling,
+)
 from autotrack.tracker.dcf import admm_settings
 
 
@@ -25,6 +30,7 @@ class FastBackend:
     sized_patches = staticmethod(fast_sampling.sized_patches)
     scale_features = staticmethod(fast_features.scale_features)
     peak = staticmethod(fast_dcf.newton_peak)
+    local_variation = staticmethod(fast_regularization.local_variation)
 
     def feature_maps(self, patch: np.ndarray) -> np.ndarray:
         return fast_features.feature_maps(patch, self.params, self.colour_table)

@@ -18,7 +18,6 @@ from numba import njit
 
 from autotrack.tracker.backend import admm_kernels
 from autotrack.tracker.dcf import (
-    GRID_AXES,
     AdmmSettings,
     centred_frequencies,
     from_spectrum,
@@ -63,13 +62,38 @@ class SpectrumTransform:
         return self._workspace
 
     def project_input(self, gain: np.ndarray) -> np.ndarray:
-        """F(gain * F^-1(`h_step_input`)), in a buffer the next projection overwrites."""
+        """F(gain * F^-1(`h_step_input`)) (eq. 12's projection), a new complex64 array.
+
+        The 2-D transforms are taken one axis at a time, as `irfft2` and `rfft2` take them
+        (the grid rows, then the half columns, and back), and the transforms along the columns
+        only on the band of rows where the gain varies (the target region's): on a row of one
+        gain value c the round trip F(c F^-1(row)) is c times the row (without the imaginary
+        parts at the zero and Nyquist column frequencies, which the real inverse ignores).
+        ~40 % less work than the full transforms on the trackers' windows (one band of a
+        fifth of the rows); the same values to rounding (tests/test_backend.py).
+        """
+        cols = self.grid_size[1]
         # The input is rewritten by the next g-step: pocketfft may work in it (no copy).
-        maps = scipy.fft.irfft2(
-            self.h_step_input, s=self.grid_size, axes=GRID_AXES, workers=1, overwrite_x=True
-        )
-        maps *= gain
-        return to_spectrum(maps)
+        spectrum = scipy.fft.ifft(self.h_step_input, axis=-2, workers=1, overwrite_x=True)
+        first, stop = _varying_rows(gain)
+        band = scipy.fft.irfft(spectrum[:, first:stop], n=cols, axis=-1, workers=1)
+        band *= gain[first:stop]
+        # Every row as a row of one gain value; the band's rows are then replaced.
+        spectrum *= gain[:, :1]
+        spectrum[..., 0].imag = 0.0
+        if cols % 2 == 0:
+            spectrum[..., cols // 2].imag = 0.0
+        spectrum[:, first:stop] = scipy.fft.rfft(band, axis=-1, workers=1)
+        return scipy.fft.fft(spectrum, axis=-2, workers=1)
+
+
+def _varying_rows(gain: np.ndarray) -> tuple[int, int]:
+    """(first, stop) of the rows holding every row of `gain` that is not one value throughout
+    ((0, 0) when none is)."""
+    varying = np.flatnonzero((gain != gain[:, :1]).any(axis=1))
+    if varying.size == 0:
+        return 0, 0
+    return int(varying[0]), int(varying[-1]) + 1
 
 
 def solve_g_step(
