@@ -40,6 +40,7 @@ class AutoTrackPlus(AutoTrack, beyond_release=True):
         )
         self.velocity = np.zeros(2)
         self.unconfident_frames = 0  # consecutive frames below the confidence gate
+        self.lookalike_seen = False  # a look-alike within the box on the last confident frame
         self.motion = motion.MotionModel(p.confidence_memory) if p.motion_prior else None
         return result
 
@@ -89,8 +90,10 @@ class AutoTrackPlus(AutoTrack, beyond_release=True):
             upright = self._upright(image)
             best_scale, scale = self.scale_filter.detect(*upright, self.scale)
             displacement = (disp_row, disp_col)
-            if scale > self.scale and self._absorbs_lookalike(response, displacement, scale):
+            lookalike = self._absorbs_lookalike(response, displacement, max(scale, self.scale))
+            if scale > self.scale and lookalike and self.lookalike_seen:
                 best_scale, scale = (p.num_scales + 1) // 2 - 1, self.scale  # the scale held
+            self.lookalike_seen = lookalike
             self.scale = scale
             self._detect_aspect(image)
 
