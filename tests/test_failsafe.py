@@ -23,8 +23,8 @@ from autotrack.io import otb_boxes
 from autotrack.io.frames import open_frames
 from autotrack.params import TrackerParams
 from autotrack.synthetic.aerial import SCENES, aerial_scene, render_aerial
-from autotrack.tracker.plus import memory
 from autotrack.tracker.plus.memory import lookalike_within
+from autotrack.tracker.plus.tracker import AutoTrackPlus
 from tests.conftest import SEQUENCES, needs_sequences
 
 SEEDS = (1, 2)
@@ -110,23 +110,23 @@ def test_the_scale_does_not_grow_over_a_lookalike_in_a_crowd():
     assert guarded.max() < 1.4 and np.median(guarded[-20:]) < 1.3
 
 
-def _gull_boxes(monkeypatch, sighted_calls: set[int] | None) -> np.ndarray:
-    """autotrack+ over Gull1's first 20 frames; `sighted_calls`: the (1-based) calls of the
-    look-alike test that see a look-alike (None: the guard off)."""
+def _gull_boxes(monkeypatch, sighted_frames: set[int] | None) -> np.ndarray:
+    """autotrack+ over Gull1's first 20 frames; `sighted_frames`: the frames (0-based) on which
+    the scale guard's look-alike test, where it runs, sees a look-alike (None: the guard off)."""
     folder = SEQUENCES / "DTB70" / "Gull1"
     truth = otb_boxes.read_boxes(folder / "groundtruth_rect.txt")
     with open_frames(folder) as source:
         frames = [source.read(index) for index in range(20)]
-    calls = []
 
-    def sighting(*args) -> bool:
-        calls.append(args)
-        return len(calls) in sighted_calls
+    def sighting(tracker, *args) -> bool:
+        return tracker.frame_number - 1 in sighted_frames
 
-    monkeypatch.setattr(memory, "lookalike_within", sighting)
     plus = preset("autotrack+")
-    params = replace(plus, lookalike_reach=0.0) if sighted_calls is None else plus
-    return _track(params, SimpleNamespace(frames=frames, boxes=truth))
+    if sighted_frames is None:
+        plus = replace(plus, lookalike_reach=0.0)
+    else:
+        monkeypatch.setattr(AutoTrackPlus, "_absorbs_lookalike", sighting)
+    return _track(plus, SimpleNamespace(frames=frames, boxes=truth))
 
 
 @needs_sequences

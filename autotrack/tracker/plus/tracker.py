@@ -57,6 +57,8 @@ class AutoTrackPlus(AutoTrack, beyond_release=True):
         # Detection (eq. 16) and the sub-pixel peak, over the angle pool with `rotation_step`.
         zf, response, (disp_row, disp_col, peak_score) = self._detect(image)
         chosen, ambiguous = self._disambiguate(response, zf)
+        # The memory's check found a single distinct peak: no look-alike for the scale guard.
+        single_peak = self.memory is not None and not ambiguous
         if chosen is not None:
             disp_row, disp_col, peak_score = chosen
         confident = self._is_confident(peak_score, response)
@@ -65,6 +67,7 @@ class AutoTrackPlus(AutoTrack, beyond_release=True):
             found = self._redetect(image, peak_score)
             if found is not None:
                 zf, response, (disp_row, disp_col, peak_score), search_box = found
+                single_peak = False  # another response, not checked
                 confident = True
                 self.unconfident_frames = 0
                 start = None  # a jump, not a motion to extrapolate
@@ -90,7 +93,9 @@ class AutoTrackPlus(AutoTrack, beyond_release=True):
             upright = self._upright(image)
             best_scale, scale = self.scale_filter.detect(*upright, self.scale)
             displacement = (disp_row, disp_col)
-            lookalike = self._absorbs_lookalike(response, displacement, max(scale, self.scale))
+            lookalike = not single_peak and self._absorbs_lookalike(
+                response, displacement, max(scale, self.scale)
+            )
             if scale > self.scale and lookalike and self.lookalike_seen:
                 best_scale, scale = (p.num_scales + 1) // 2 - 1, self.scale  # the scale held
             self.lookalike_seen = lookalike
