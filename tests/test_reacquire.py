@@ -68,13 +68,19 @@ def test_a_landmark_the_pose_puts_outside_the_image_is_out_of_view(flight):
     assert keeper.out_of_view(1 + ReacquireParams().max_prior_age_frames + 1) == {}
 
 
-def test_lost_landmark_is_found_where_the_pose_predicts_it(flight):
+def _first_frame_templates(flight):
+    """The flight's first frame (RGB), its landmark boxes and the refiner's templates of them."""
     rotations, positions, renderer = flight
     frame0 = renderer.render(rotations[0], positions[0])[..., ::-1].copy()
     boxes = first_boxes(rotations[0], positions[0])
     refiner = PointRefiner()
     refiner.init(frame0, boxes)
-    templates = {k: refiner.template_of(k) for k in boxes}
+    return frame0, boxes, {k: refiner.template_of(k) for k in boxes}
+
+
+def test_lost_landmark_is_found_where_the_pose_predicts_it(flight):
+    rotations, positions, renderer = flight
+    frame0, boxes, templates = _first_frame_templates(flight)
     keeper = LandmarkKeeper(SCENE, ReacquireParams(lost_frames=2))
     keeper.observe(0, to_grey(frame0), pose_estimate(0, rotations[0], positions[0]), boxes, {})
     found = []
@@ -96,11 +102,7 @@ def test_lost_landmark_is_found_where_the_pose_predicts_it(flight):
 def test_an_rgb_frame_is_searched_exactly_as_its_grey_image(flight):
     # Only the search window is converted to grey: the same match as in the whole frame's grey.
     rotations, positions, renderer = flight
-    frame0 = renderer.render(rotations[0], positions[0])[..., ::-1].copy()
-    boxes = first_boxes(rotations[0], positions[0])
-    refiner = PointRefiner()
-    refiner.init(frame0, boxes)
-    templates = {k: refiner.template_of(k) for k in boxes}
+    frame0, boxes, templates = _first_frame_templates(flight)
     frame = renderer.render(rotations[21], positions[21])[..., ::-1].copy()
     pose = pose_estimate(21, rotations[21], positions[21], ("A", "B", "D"))
     found = {}
@@ -114,11 +116,7 @@ def test_an_rgb_frame_is_searched_exactly_as_its_grey_image(flight):
 
 def test_a_still_covered_landmark_is_not_restarted(flight):
     rotations, positions, renderer = flight
-    frame0 = renderer.render(rotations[0], positions[0])[..., ::-1].copy()
-    boxes = first_boxes(rotations[0], positions[0])
-    refiner = PointRefiner()
-    refiner.init(frame0, boxes)
-    templates = {k: refiner.template_of(k) for k in boxes}
+    frame0, boxes, templates = _first_frame_templates(flight)
     keeper = LandmarkKeeper(SCENE, ReacquireParams(lost_frames=1))
     keeper.observe(0, to_grey(frame0), pose_estimate(0, rotations[0], positions[0]), boxes, {})
     frame = renderer.render(rotations[10], positions[10])[..., ::-1].copy()
