@@ -28,7 +28,7 @@ FHOG_STAGES = (
 
 @pytest.mark.skipif(not cold_start.GULL1.is_dir(), reason="shared data not available")
 def test_a_fresh_process_compiles_each_tracker_kernel_once(tmp_path):
-    figures = cold_start.run(tmp_path, frames=3)
+    figures = cold_start.run(tmp_path, frames=3, helper=False)
     ours = {
         name.removeprefix("autotrack.tracker.backend."): count
         for name, count in figures["compilations"].items()

@@ -114,7 +114,9 @@ class AutoTrack:
         self.region = regularization.target_region(self.grid_size, self.region_size)
         self.spatial_window = self.base_window
         channels = feature_dim(p, colour=not self.grey)
-        self.backend = make_backend(p, self.colour_table, channels, self.grid_size)
+        self.backend = make_backend(
+            p, self.colour_table, channels, self.grid_size, colour=not self.grey
+        )
         self.scale_filter = ScaleFilter(
             p,
             target_size,

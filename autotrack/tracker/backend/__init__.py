@@ -88,11 +88,20 @@ class ReferenceBackend:
 
 
 def make_backend(
-    params: TrackerParams, colour_table, channels: int, grid_size: tuple[int, int]
+    params: TrackerParams,
+    colour_table,
+    channels: int,
+    grid_size: tuple[int, int],
+    colour: bool = True,
 ) -> Backend:
-    """The backend `params.backend` names, for spectra of (channels, *grid_size)."""
+    """The backend `params.backend` names, for spectra of (channels, *grid_size) of colour (or
+    grey) frames. A fast one compiles its kernels on first use, helped by a second process on
+    a cold cache (`compile_ahead`)."""
     if params.backend == "reference":
         return ReferenceBackend(params, colour_table, grid_size)
-    from autotrack.tracker.backend.fast import FastBackend  # numba: only when asked for
+    # numba: only when asked for
+    from autotrack.tracker.backend import compile_ahead
+    from autotrack.tracker.backend.fast import FastBackend
 
+    compile_ahead.arm(params, colour)
     return FastBackend(params, colour_table, channels, grid_size)
