@@ -1,5 +1,5 @@
-"""The helper that compiles a cold cache's kernels from the other end (`compile_ahead`): it
-must call exactly the kernel signatures a tracker calls, so that it never writes a cache entry
+"""The helper that compiles a cold cache's kernels from the other end (`compile_ahead` starts
+`compile_helper`): it must call exactly the kernel signatures a tracker calls, so that it never writes a cache entry
 the tracker would not, and it must start, once, at a process's first compilation."""
 
 from __future__ import annotations
@@ -22,7 +22,7 @@ import importlib, json, pkgutil, sys
 import numpy as np
 import autotrack.tracker.backend as package
 from autotrack import AutoTrack, preset
-from autotrack.tracker.backend.compile_ahead import compile_in_reverse
+from autotrack.tracker.compile_helper import compile_in_reverse
 
 def signatures():
     found = {}
