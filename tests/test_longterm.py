@@ -46,6 +46,23 @@ def test_the_memory_decides_between_two_peaks_and_the_sub_cell_peak_is_refined()
     assert memory.disambiguate(single, long_term, 0.5, 3.0) == (None, False)
 
 
+def test_the_memory_response_is_computed_only_with_a_second_peak():
+    grid = (40, 40)
+    short_term = _bump(grid, (0, 0), 1.0) + _bump(grid, (5.3, -7), 0.9)
+    long_term = _bump(grid, (0, 0), 0.3) + _bump(grid, (5, -7), 1.0)
+    calls = []
+
+    def memory_response() -> np.ndarray:
+        calls.append(1)
+        return long_term
+
+    single = _bump(grid, (2, 3), 1.0)
+    assert memory.disambiguate(single, memory_response, 0.5, 3.0) == (None, False)
+    assert calls == []  # one peak: no second detection
+    lazy = memory.disambiguate(short_term, memory_response, 0.5, 3.0)
+    assert calls == [1] and lazy == memory.disambiguate(short_term, long_term, 0.5, 3.0)
+
+
 def test_the_memory_moves_a_track_off_its_peak_only_to_one_it_tells_apart():
     grid = (40, 40)
     # The target at the centre, a look-alike 9 cells off that the memory matches 10 % better

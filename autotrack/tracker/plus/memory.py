@@ -20,6 +20,7 @@ look-alikes the one on the target's path wins unless the other has clearly more 
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 
 import numpy as np
 
@@ -129,7 +130,7 @@ def subcell_peak(response: np.ndarray, cell: tuple[int, int]) -> tuple[float, fl
 
 def disambiguate(
     response: np.ndarray,
-    memory_response: np.ndarray,
+    memory_response: np.ndarray | Callable[[], np.ndarray],
     ratio: float,
     separation: float,
     motion: MotionPrior | None = None,
@@ -145,10 +146,15 @@ def disambiguate(
     (None, True). So the memory takes a track back from a distractor it knows is not the
     target, and never moves it onto a look-alike it cannot tell from the target (a walker in
     a group, a car in a queue).
+
+    `memory_response` may be a function that computes it: it is called only with a second
+    peak, so a frame without a look-alike costs no second detection.
     """
     peaks = distinct_peaks(response, ratio, separation)
     if len(peaks) < 2:
         return None, False
+    if callable(memory_response):
+        memory_response = memory_response()
     expected = motion.predicted if motion is not None else (0.0, 0.0)
     reach = _cell_distance(peaks[0], expected, response.shape)
     held = _near_max(memory_response, peaks[0])

@@ -165,7 +165,10 @@ class AutoTrackPlus(AutoTrack, beyond_release=True):
         (memory.disambiguate): (that peak or None, whether a distractor is present)."""
         if self.memory is None:
             return None, False
-        memory_response = self.memory.response(zf, self.grid_size)
+
+        def memory_response() -> np.ndarray:  # only with a second peak
+            return self.memory.response(zf, self.grid_size)
+
         ratio, separation = self.params.distractor_ratio, self.peak_separation
         prior = None
         if self.motion is not None:
