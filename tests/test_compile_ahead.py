@@ -1,6 +1,7 @@
 """The helper that compiles a cold cache's kernels from the other end (`compile_ahead` starts
-`compile_helper`): it must call exactly the kernel signatures a tracker calls, so that it never writes a cache entry
-the tracker would not, and it must start, once, at a process's first compilation."""
+`compile_helper`): it must call exactly the kernel signatures a tracker calls, so that it never
+writes a cache entry the tracker would not, and it must start, once, at a process's first
+compilation."""
 
 from __future__ import annotations
 

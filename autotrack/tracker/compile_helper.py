@@ -10,9 +10,15 @@ import pickle
 import sys
 from dataclasses import replace
 
+import cv2
 import numpy as np
 
 from autotrack.params import TrackerParams
+from autotrack.tracker.backend import fast_features, fast_fhog, gradients
+from autotrack.tracker.backend.fast import FastBackend
+from autotrack.tracker.features import feature_dim
+from autotrack.tracker.scale import scale_sizes
+from autotrack.tracker.tracker import AutoTrack
 
 
 class _FirstCalls:
@@ -63,14 +69,6 @@ def compile_in_reverse(params: TrackerParams, colour: bool) -> None:
     to compile) computed for a small synthetic target; the feature kernels, which the first
     frame calls one after the other, on the arguments a run of their Python functions on a
     small patch recorded, in the reverse order of that run."""
-    import cv2
-
-    from autotrack.tracker.backend import fast_features, fast_fhog, gradients
-    from autotrack.tracker.backend.fast import FastBackend
-    from autotrack.tracker.features import feature_dim
-    from autotrack.tracker.scale import scale_sizes
-    from autotrack.tracker.tracker import AutoTrack
-
     rng = np.random.default_rng(0)
     frame = rng.integers(0, 64, (120, 160, 3), dtype=np.uint8)
     frame[40:70, 60:90] = (230, 180, 40)
