@@ -371,7 +371,7 @@ class DisplayLoop:
             self._send_canvas(view, maps)
             shown["canvas"], last["canvas"] = version, now
         if version != shown["slow"] and now >= last["slow"] + slow_period:
-            self._send_slow(view, maps)
+            self._send_slow(view, maps, mode)
             shown["slow"], last["slow"] = version, now
 
     def _send_canvas(self, view: FrameView, maps: str) -> None:
@@ -410,7 +410,7 @@ class DisplayLoop:
             self.scene_api.set_global_visibility(False)
             self._canvas_dirty = True
 
-    def _send_slow(self, view: FrameView, maps: str) -> None:
+    def _send_slow(self, view: FrameView, maps: str, mode: str) -> None:
         status = view.status + missing_map_note(view, MAP_KINDS.get(maps))
         self.panels.quiet.set(self.panels.status, "content", status)
         self.plots.update(view.history, view.frame_index)
@@ -422,10 +422,19 @@ class DisplayLoop:
         if self.panels.display.legend.content != legend:
             self.panels.quiet.set(self.panels.display.legend, "content", legend)
         self.stats.plot_updates += 1
-        pose_view = view.pose_view
-        if pose_view is not None:
-            if self.panels.display.trajectory.value == TRAJECTORY_SMOOTHED:
-                pose_view = smoothed_view(pose_view)
-            self.view3d.update(pose_view, thumbnail(view.frame))
-            self.stats.scene_updates += 1
+        if mode == CANVAS_3D:
+            self._send_scene(view)
         self.stats.map_panel_updates += self.map_panels.update(view, maps == MAPS_PANELS)
+
+    def _send_scene(self, view: FrameView) -> None:
+        """The 3-D view's camera and trajectory, sent only while the canvas shows the 3-D view
+        (the switch to it publishes a view, which brings it up to date): viser's client renders
+        its canvas continuously for 250 ms after every scene message, hidden nodes or not, and
+        under software WebGL those frames cost the browser ~90 ms of CPU each (docs/app.md)."""
+        pose_view = view.pose_view
+        if pose_view is None:
+            return
+        if self.panels.display.trajectory.value == TRAJECTORY_SMOOTHED:
+            pose_view = smoothed_view(pose_view)
+        self.view3d.update(pose_view, thumbnail(view.frame))
+        self.stats.scene_updates += 1

@@ -30,6 +30,7 @@ from autotrack_studio.canvas import (
     peak_position,
 )
 from autotrack_studio.config import AppConfig
+from autotrack_studio.panels import CANVAS_3D
 from autotrack_studio.paths import (
     UploadLimits,
     extract_image_zip,
@@ -366,6 +367,16 @@ def test_trajectory_has_a_gap_where_poses_are_missing() -> None:
     np.testing.assert_array_equal(segments[2], [positions[3], positions[4]])  # frames 4-5
 
 
+def test_ground_truth_is_drawn_dashed_so_the_estimate_on_it_shows() -> None:
+    from autotrack_studio.view3d import GT_DASH, dashes, segments_with_gaps
+
+    positions = np.arange(30, dtype=float).reshape(10, 3)
+    drawn = dashes(segments_with_gaps(range(10), positions), *GT_DASH)
+    assert 0 < GT_DASH[0] < GT_DASH[1]
+    starts = [int(segment[0, 0]) // 3 for segment in drawn]  # the frame each segment leaves
+    assert starts == [i for i in range(9) if i % GT_DASH[1] < GT_DASH[0]]
+
+
 # -- a tab driven through its widgets -----------------------------------------------------------
 
 DEMO = REPO / "static" / "demo"
@@ -610,8 +621,11 @@ def test_playing_tracks_every_target_and_estimates_poses(studio) -> None:
         assert np.isfinite(target.signals["peak_score"][1 : last + 1]).all()
     assert all(run.poses[index].valid for index in range(last + 1))
     display = tab.display
-    _wait_for(lambda: display.view3d.segments_sent >= last - 1)
     _wait_for(lambda: display.stats.overlay_maps > 0 and display.stats.canvas_frames > 0)
+    # The 3-D view is not sent while the canvas shows the frame, and is on switching to it.
+    assert display.stats.scene_updates == 0 and display.view3d.segments_sent == 0
+    _set(tab.panels.display.canvas, CANVAS_3D)
+    _wait_for(lambda: display.view3d.segments_sent >= last - 1)
     _wait_for(lambda: (data := display.plots.data_of(0)) is not None and len(data[0]) == last + 3)
     peaks = np.concatenate([t.signals["peak_score"][1 : last + 1] for t in run.targets.values()])
     low, high = display.plots.y_scale_of(0)["range"]
@@ -625,6 +639,7 @@ def test_playing_tracks_every_target_and_estimates_poses(studio) -> None:
 def test_3d_view_switches_between_raw_and_smoothed_trajectories(studio) -> None:
     tab, _ = _open_tab(studio)
     _draw_demo_boxes(tab)
+    _set(tab.panels.display.canvas, CANVAS_3D)
     _set(tab.panels.playback.frame, 9)
     assert tab.wait_idle()
     view3d = tab.display.view3d
@@ -742,6 +757,7 @@ def test_correcting_a_box_by_dragging_retracks_that_target_from_there(studio) ->
 def test_invalid_poses_are_drawn_as_invalid(studio) -> None:
     tab, _ = _open_tab(studio)
     _draw_demo_boxes(tab)
+    _set(tab.panels.display.canvas, CANVAS_3D)
     _set(tab.panels.playback.frame, 4)
     assert tab.wait_idle()
     view3d = tab.display.view3d

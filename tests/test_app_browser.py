@@ -199,9 +199,9 @@ def test_draw_play_inspect_and_download_in_chromium(studio, tmp_path: Path) -> N
             "canvas_cap": float(tab.panels.display.canvas_fps.value),
         }
 
-        # Overlays, plots and the trajectory reached the browser.
-        _wait_for(lambda: display.view3d.segments_sent > 0, what="the trajectory", tab=tab)
+        # Overlays and plots reached the browser (the 3-D view only once it is shown).
         assert display.stats.overlay_maps > 0 and display.stats.canvas_frames > 0
+        assert display.stats.scene_updates == 0
         assert sum(pose.valid for pose in run.poses.values()) > PLAY_FRAMES // 2
         # The four charts were drawn in the page with every tracked frame (viser's uPlot
         # component registers each chart under window.__viserTestpoints).
@@ -231,6 +231,7 @@ def test_draw_play_inspect_and_download_in_chromium(studio, tmp_path: Path) -> N
         _wait_for(
             lambda: display.view3d.frustum_state != "none", what="the camera frustum", tab=tab
         )
+        _wait_for(lambda: display.view3d.segments_sent > 0, what="the trajectory", tab=tab)
         time.sleep(1.5)  # let software WebGL draw the scene before the screenshot
         page.screenshot(path=str(ARTIFACTS / "app-3d-view.png"))
 

@@ -40,7 +40,7 @@ def test_the_demo_ground_truth_is_scored_and_the_pose_error_shown(studio, tmp_pa
         _wait_for(
             lambda: tab.display.view3d.segments_sent > 0, what="the trajectory drawn", tab=tab
         )
-        legend = page.get_by_text("ground truth (wider, under the estimate)")
+        legend = page.get_by_text("ground truth (dashed)")
         _wait_for(lambda: legend.count() >= 1, what="the 3-D legend", tab=tab)
         page.wait_for_timeout(1500)  # the software renderer draws the scene
         page.screenshot(path=str(ARTIFACTS / "app-truth-3d.png"))
