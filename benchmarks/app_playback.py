@@ -15,6 +15,7 @@ python benchmarks/app_playback.py --repeats 3 --browser
 from __future__ import annotations
 
 import argparse
+import os
 import statistics
 import sys
 import tempfile
@@ -64,8 +65,25 @@ def trackers_alone(config: AppConfig, sessions: Path) -> float:
     return last / seconds
 
 
-def in_app(config: AppConfig, browser: bool, profile: Path) -> float:
-    """Frames per second of a tab playing the demo with its four boxes, as fast as it goes."""
+def chromium_cpu_seconds() -> float:
+    """CPU seconds the machine's running Chromium processes have used (Linux /proc; 0 where
+    there is none)."""
+    ticks = os.sysconf("SC_CLK_TCK")
+    total = 0.0
+    for stat in Path("/proc").glob("[0-9]*/stat"):
+        try:
+            text = stat.read_text()
+        except OSError:  # the process ended meanwhile
+            continue
+        if text[text.index("(") + 1 : text.rindex(")")].startswith("chromium"):
+            fields = text[text.rindex(")") + 2 :].split()  # from field 3 (state) on
+            total += (int(fields[11]) + int(fields[12])) / ticks  # utime + stime
+    return total
+
+
+def in_app(config: AppConfig, browser: bool, profile: Path) -> tuple[float, float]:
+    """Frames per second of a tab playing the demo with its four boxes, as fast as it goes,
+    and the cores Chromium used meanwhile (0 without a browser)."""
     from autotrack_studio.server import StudioServer
 
     server = StudioServer(config)
@@ -80,10 +98,12 @@ def in_app(config: AppConfig, browser: bool, profile: Path) -> float:
             tab.worker.submit(controller.toggle_play)
             _wait(lambda: controller.cursor >= 1)
             started, first = time.perf_counter(), controller.cursor
+            browser_cpu = chromium_cpu_seconds()
             _wait(lambda: controller.cursor >= last)
             seconds = time.perf_counter() - started
+            browser_cpu = chromium_cpu_seconds() - browser_cpu
             assert tab.wait_idle()
-            return (last - first) / seconds
+            return (last - first) / seconds, browser_cpu / seconds
     finally:
         server.stop()
 
@@ -133,12 +153,15 @@ def main() -> None:
         root = Path(folder)
         config = AppConfig(port=0, sessions_dir=root / "sessions", demo_dir=DEMO)
         config.sessions_dir.mkdir()
-        app_rates, alone_rates = [], []
+        app_rates, alone_rates, browser_cores = [], [], []
         for repeat in range(args.repeats):
-            app_rates.append(in_app(config, args.browser, root / f"profile{repeat}"))
+            rate, cores = in_app(config, args.browser, root / f"profile{repeat}")
+            app_rates.append(rate)
+            browser_cores.append(cores)
             alone_rates.append(trackers_alone(config, config.sessions_dir))
+            browser_use = f" (Chromium {cores:.2f} cores)" if args.browser else ""
             print(
-                f"run {repeat + 1}: in app {app_rates[-1]:.1f} frames/s, "
+                f"run {repeat + 1}: in app {app_rates[-1]:.1f} frames/s{browser_use}, "
                 f"trackers alone {alone_rates[-1]:.1f} frames/s",
                 flush=True,
             )
@@ -149,6 +172,11 @@ def main() -> None:
         f"{where}; four targets on the demo, {statistics.median(app_rates):.1f} vs "
         f"{statistics.median(alone_rates):.1f} frames/s)"
     )
+    if args.browser:
+        print(
+            f"Chromium used {statistics.median(browser_cores):.2f} of the machine's "
+            f"{os.cpu_count()} cores while the tab played (median; docs/app.md says where)"
+        )
 
 
 if __name__ == "__main__":
