@@ -20,8 +20,8 @@ from autotrack_studio.views import PoseView
 VALID_COLOUR = (40, 180, 60)
 INVALID_COLOUR = (220, 40, 40)
 GT_COLOUR = (60, 130, 240)
-"""Blue, drawn wider than the green estimate under it, so an estimate on the ground truth
-leaves a blue rim either side instead of hiding it."""
+"""Blue, wider than the green estimate and dashed (GT_DASH), so an estimate lying on the ground
+truth shows."""
 GT_THICKNESS = 7.0
 TRAJECTORY_THICKNESS = 2.5
 GT_DASH = (2, 4)
