@@ -82,6 +82,16 @@ class BrowserSpace:
     def upload_roots(self) -> tuple[Path, ...]:
         """The upload folders this browser's tabs may open things from (made if missing)."""
         folder = self.upload_root if self.sees_everything else self.upload_dir
+        # A closing tab of this browser removes the folder while it is empty (`release`): if
+        # that happens between mkdir finding it and checking it is a folder, mkdir reports it
+        # existing but not a folder. Made again then; a file in its place is still an error.
+        for _ in range(3):
+            try:
+                folder.mkdir(parents=True, exist_ok=True)
+                return (folder,)
+            except FileExistsError:
+                if folder.exists():
+                    raise
         folder.mkdir(parents=True, exist_ok=True)
         return (folder,)
 

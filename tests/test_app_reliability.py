@@ -27,7 +27,7 @@ from autotrack.errors import InputError, SessionError
 from autotrack_studio.browser_text import readable
 from autotrack_studio.canvas import fit_letterbox, letterbox_image
 from autotrack_studio.config import AppConfig
-from autotrack_studio.owners import browser_tag
+from autotrack_studio.owners import BrowserSpace, browser_tag
 from autotrack_studio.paths import PARTIAL_PREFIX, UploadLimits, find_sequences, store_upload
 from autotrack_studio.viser_private import (
     UploadPart,
@@ -496,3 +496,32 @@ def test_a_tab_opens_while_another_tab_of_its_browser_removes_its_empty_upload_f
     assert not folder.exists()  # gone, and the tab's roots were made all the same
     with pytest.raises(InputError, match="is not an existing folder"):
         AppConfig(allowed_roots=(studio.config.upload_dir / "no-such-root",)).browsable_roots()
+
+
+def test_an_upload_folder_removed_while_a_tab_makes_it_is_made_again(
+    tmp_path: Path, monkeypatch
+) -> None:
+    """The other side of that race: the closing tab removes the folder after the new tab's
+    mkdir found it and before mkdir checked it is a folder, so mkdir reported it existing
+    and not a folder (FileExistsError in a CI run); the new tab makes it again."""
+    space = BrowserSpace(tmp_path / "sessions", tmp_path / "uploads", "racing")
+    space.upload_dir.mkdir(parents=True)
+    real_mkdir = Path.mkdir
+    raced = []
+
+    def mkdir_racing_a_release(self, *args, **kwargs):
+        if self == space.upload_dir and not raced:
+            raced.append(self)
+            self.rmdir()  # the other tab's release
+            raise FileExistsError(errno.EEXIST, "File exists", str(self))
+        return real_mkdir(self, *args, **kwargs)
+
+    monkeypatch.setattr(Path, "mkdir", mkdir_racing_a_release)
+    assert space.upload_roots() == (space.upload_dir,)
+    assert raced and space.upload_dir.is_dir()
+    monkeypatch.setattr(Path, "mkdir", real_mkdir)
+    # A file where the folder should be is still refused.
+    space.upload_dir.rmdir()
+    space.upload_dir.write_text("not a folder")
+    with pytest.raises(FileExistsError):
+        space.upload_roots()
