@@ -82,17 +82,14 @@ class BrowserSpace:
     def upload_roots(self) -> tuple[Path, ...]:
         """The upload folders this browser's tabs may open things from (made if missing)."""
         folder = self.upload_root if self.sees_everything else self.upload_dir
-        # A closing tab of this browser removes the folder while it is empty (`release`): if
-        # that happens between mkdir finding it and checking it is a folder, mkdir reports it
-        # existing but not a folder. Made again then; a file in its place is still an error.
-        for _ in range(3):
-            try:
-                folder.mkdir(parents=True, exist_ok=True)
-                return (folder,)
-            except FileExistsError:
-                if folder.exists():
-                    raise
-        folder.mkdir(parents=True, exist_ok=True)
+        try:
+            folder.mkdir(parents=True, exist_ok=True)
+        except FileExistsError:
+            if folder.exists():
+                raise  # a file in its place
+            # A closing tab of this browser removed the empty folder (`release`) between
+            # mkdir finding it and checking it is a folder: made again.
+            folder.mkdir(parents=True, exist_ok=True)
         return (folder,)
 
     def session_files(self) -> list[Path]:
