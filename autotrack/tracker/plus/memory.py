@@ -55,14 +55,17 @@ def distinct_peaks(response: np.ndarray, ratio: float, separation: float) -> lis
     top = float(response.max())
     if not (math.isfinite(top) and top > 0):
         return [tuple(int(v) for v in np.unravel_index(np.argmax(response), response.shape))]
-    neighbours = np.stack(
-        [np.roll(response, (dr, dc), axis=(0, 1)) for dr in (-1, 0, 1) for dc in (-1, 0, 1)]
-    )
-    local_max = (response >= neighbours.max(axis=0)) & (response >= ratio * top)
-    rows, cols = np.nonzero(local_max)
-    order = np.argsort(-response[rows, cols], kind="stable")
-    kept: list[tuple[int, int]] = []
+    # Only cells above the ratio can be peaks: their 3 x 3 neighbourhoods are gathered alone.
+    rows, cols = np.nonzero(response >= ratio * top)
     height, width = response.shape
+    values = response[rows, cols]
+    local_max = np.ones(len(rows), dtype=bool)
+    for dr in (-1, 0, 1):
+        for dc in (-1, 0, 1):
+            local_max &= values >= response[(rows + dr) % height, (cols + dc) % width]
+    rows, cols, values = rows[local_max], cols[local_max], values[local_max]
+    order = np.argsort(-values, kind="stable")
+    kept: list[tuple[int, int]] = []
     for index in order:
         row, col = int(rows[index]), int(cols[index])
         if all(

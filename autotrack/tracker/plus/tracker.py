@@ -31,7 +31,8 @@ class AutoTrackPlus(AutoTrack, beyond_release=True):
         result = super().init(frame, box)
         p = self.params
         image = self._prepare(as_image(frame))
-        self.angle, self.last_peak, self.turning = 0.0, math.inf, False  # rotation.py's state
+        # rotation.py's state: the angle, the highest peak since the angle was last checked
+        self.angle, self.aligned_peak, self.turning = 0.0, math.inf, False
         self.memory = memory.LongTermMemory(self.filter_f, p.memory_rate) if p.memory_rate else None
         self.peak_separation = max(2.0, min(self.region_size) / 2.0)  # another object, in cells
         self.aspect_filter = self._start_aspect_filter(image)
@@ -236,8 +237,11 @@ class AutoTrackPlus(AutoTrack, beyond_release=True):
 
     def _detect(self, image: np.ndarray):
         """(features spectrum, response, (row, col, peak)) at the current angle; with
-        `rotation_step`, when that peak fell below the last frame's (a turn lowers the match) or
-        the target turned on the last frame, one step either way is tried and taken if it wins
+        `rotation_step`, when that peak fell by `rotation_margin` below the highest since the
+        angle was last checked (a turn lowers the match; a turned sample wins only by that
+        margin over the current one, and at best it restores the match the target had at its
+        angle, so a smaller drop cannot be a turn it would take) or the target turned on the
+        last frame, one step either way is tried and taken if it wins
         (`rotation.turn_wins`: a peak higher by `rotation_margin`, a response as sharp) and
         still matches the filter: a confidence of at least the gate squared (0.49, the gate's
         APCE level). A turning target keeps about half its usual peak (MotorRolling's flips:
@@ -247,8 +251,10 @@ class AutoTrackPlus(AutoTrack, beyond_release=True):
         p = self.params
         sampler = self._sampler(image)
         best = self._detect_patch(sampler.patch(self.angle))
-        last_peak, self.last_peak = self.last_peak, best[2][2]
-        if not self._turns_resolved() or (best[2][2] >= last_peak and not self.turning):
+        peak = best[2][2]
+        held = peak * (1.0 + p.rotation_margin) >= self.aligned_peak
+        if not self._turns_resolved() or (held and not self.turning):
+            self.aligned_peak = max(self.aligned_peak, peak)
             return best
         best_angle = self.angle
         for angle in rotation.candidate_angles(self.angle, p.rotation_step)[1:]:
@@ -259,6 +265,7 @@ class AutoTrackPlus(AutoTrack, beyond_release=True):
                 best, best_angle = turned, angle
         self.turning = best_angle != self.angle
         self.angle = rotation.wrapped(best_angle)
+        self.aligned_peak = best[2][2]
         return best
 
     def _turns_resolved(self) -> bool:
