@@ -12,7 +12,7 @@ import pytest
 from autotrack.errors import InputError
 from autotrack.params import PRESETS, TrackerParams
 from autotrack.tracker.plus import rotation
-from autotrack.tracker.sampling import search_patch
+from autotrack.tracker.sampling import scale_sizes, search_patch
 from autotrack.tracker.tracker import AutoTrack
 from tests.sequences import spinning_target_sequence
 
@@ -59,9 +59,34 @@ def test_offset_in_the_turned_frame_lands_on_the_turned_point():
 
 def test_upright_view_centres_the_position():
     image = _textured_image().astype(np.uint8)
-    view, local = rotation.upright_view(image, (120.0, 160.0), 0.0, 41)
+    view, local = rotation.upright_view(image, (120.0, 160.0), 0.0, (41, 41))
     np.testing.assert_array_equal(local, [21.0, 21.0])
     np.testing.assert_array_equal(view, image[119 - 20 : 119 + 21, 159 - 20 : 159 + 21])
+
+
+def test_upright_view_holds_the_largest_scale_samples_of_a_turned_target():
+    """The scale filter's view of a turned target is the size of its largest samples (this
+    frame's scale search and the next update's, one step further) per axis, not a square on the
+    long side's diagonal: every sample cut from it is the one a generous view gives."""
+    image = _textured_image().astype(np.uint8)
+    tracker = AutoTrack(PRESETS["autotrack+"])
+    tracker.init(image, (130.0, 110.0, 60.0, 20.0))  # a wide target: x, y, w, h
+    tracker.angle = 30.0
+    view, local = tracker._upright(image)
+    assert 2 * view.shape[0] < view.shape[1]  # per axis (20 and 60 px x the steps), no square
+    scale_filter = tracker.scale_filter
+    side = 4 * int(np.max(view.shape))
+    generous, generous_local = rotation.upright_view(
+        image, tracker.position, tracker.angle, (side, side)
+    )
+    largest = tracker.scale * scale_filter.scale_steps[0] ** 2
+    factors = np.array([largest, tracker.scale * scale_filter.scale_steps[0], tracker.scale])
+    sizes = scale_sizes(scale_filter.base_target_size_hw, factors)
+    model = scale_filter.model_size_hw
+    cut = tracker.backend.sized_patches(view, local, sizes, model)
+    expected = tracker.backend.sized_patches(generous, generous_local, sizes, model)
+    # the same pixels up to the warp's fixed-point rounding of its coordinates
+    assert np.max(np.abs(cut.astype(int) - expected.astype(int))) <= 1
 
 
 def test_reported_box_bounds_the_inscribed_ellipse():

@@ -105,17 +105,19 @@ def rotated_search_patches(
 
 
 def upright_view(
-    image: np.ndarray, position: tuple[float, float], angle_deg: float, side: int
+    image: np.ndarray, position: tuple[float, float], angle_deg: float, size_hw: tuple[int, int]
 ) -> tuple[np.ndarray, np.ndarray]:
-    """A `side` x `side` view of the image around the 1-based `position`, rotated so the target
-    is upright, and the position's 1-based (row, col) in it: what the scale filter samples."""
-    centre = side // 2  # 0-based index of `position` in the view, as crop_replicate centres
+    """A `size_hw` (rows, cols) view of the image around the 1-based `position`, rotated so the
+    target is upright, and the position's 1-based (row, col) in it: what the scale filter
+    samples. The samples are axis-aligned in the view, so it need only hold the largest."""
+    rows, cols = int(size_hw[0]), int(size_hw[1])
+    centre = (rows // 2, cols // 2)  # 0-based index of `position`, as crop_replicate centres
     # Turned about the point half a pixel past the position's pixel: the centre of an even-sized
     # crop around it (sampling.crop_replicate), about which rotated_search_patches turns too.
     source_centre = (float(position[1]) - 0.5, float(position[0]) - 0.5)
-    matrix = _inverse_map(angle_deg, source_centre, (centre + 0.5, centre + 0.5))
-    view = _warp(image, matrix, (side, side))
-    return view, np.array([centre + 1.0, centre + 1.0])
+    matrix = _inverse_map(angle_deg, source_centre, (centre[1] + 0.5, centre[0] + 0.5))
+    view = _warp(image, matrix, (rows, cols))
+    return view, np.array([centre[0] + 1.0, centre[1] + 1.0])
 
 
 def candidate_angles(angle_deg: float, step_deg: float) -> tuple[float, ...]:

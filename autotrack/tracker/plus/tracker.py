@@ -285,13 +285,14 @@ class AutoTrackPlus(AutoTrack, beyond_release=True):
     def _upright(self, image: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(image, position) for the scale filter: the frame itself, or with the target turned,
         a view around it turned upright that holds the largest scale sample of this frame's
-        scale search and of the update after it (one step further)."""
+        scale search and of the update after it (one step further), with a pixel to spare on
+        each side (the samples are axis-aligned in the view: its size is theirs)."""
         if self.angle == 0.0:
             return image, self.position
         steps = self.scale_filter.scale_steps[0] ** 2
-        largest = np.max(self.scale_filter.base_target_size_hw) * self.scale * steps
-        side = int(math.ceil(largest * math.sqrt(2.0))) + 2
-        return rotation.upright_view(image, self.position, self.angle, side)
+        largest_hw = self.scale_filter.base_target_size_hw * self.scale * steps
+        size_hw = (int(math.ceil(largest_hw[0])) + 2, int(math.ceil(largest_hw[1])) + 2)
+        return rotation.upright_view(image, self.position, self.angle, size_hw)
 
     def _sampler(self, image: np.ndarray) -> rotation.TurnedSampler:
         """This frame's search region at the current position and scale, at any angle."""
