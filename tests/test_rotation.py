@@ -89,6 +89,40 @@ def test_upright_view_holds_the_largest_scale_samples_of_a_turned_target():
     assert np.max(np.abs(cut.astype(int) - expected.astype(int))) <= 1
 
 
+def _full_warp(image: np.ndarray, matrix: np.ndarray, size_hw: tuple[int, int]) -> np.ndarray:
+    """cv2.warpAffine of the whole image, as the views were cut before they read their part."""
+    flags = cv2.INTER_LINEAR | cv2.WARP_INVERSE_MAP
+    size = (size_hw[1], size_hw[0])
+    return cv2.warpAffine(image, matrix, size, flags=flags, borderMode=cv2.BORDER_REPLICATE)
+
+
+def test_turned_views_are_the_warps_of_the_whole_image():
+    """A 3-channel warp taken as 4 channels gives the 3-channel values, and an upright view
+    warped from the part of the image it reads is the view of the whole image: at any angle,
+    inside the image and across its edges and corners (replicated)."""
+    rng = np.random.default_rng(5)
+    image = np.dstack([_textured_image(seed) for seed in (3, 4, 5)]).astype(np.uint8)
+    matrix = rotation._inverse_map(23.0, (60.3, 70.8), (49.5, 39.5))
+    np.testing.assert_array_equal(
+        rotation._warp(image, matrix, (80, 100)), _full_warp(image, matrix, (80, 100))
+    )
+    differing = 0
+    pixels = 0
+    for _ in range(60):
+        position = (float(rng.integers(1, 241)), float(rng.integers(1, 321)) + 0.5)
+        angle = float(rng.uniform(-180.0, 180.0))
+        size_hw = (int(rng.integers(5, 90)), int(rng.integers(5, 90)))
+        view, local = rotation.upright_view(image, position, angle, size_hw)
+        centre = (local[1] - 0.5, local[0] - 0.5)
+        matrix = rotation._inverse_map(angle, (position[1] - 0.5, position[0] - 0.5), centre)
+        whole = _full_warp(image, matrix, size_hw)
+        # the part's shift changes the map's last bit at most: a grey level on a rare pixel
+        assert np.max(np.abs(view.astype(int) - whole.astype(int))) <= 1
+        differing += int(np.count_nonzero(view != whole))
+        pixels += view.size
+    assert differing <= 1e-3 * pixels
+
+
 def test_reported_box_bounds_the_inscribed_ellipse():
     size = np.array([20.0, 60.0])
     np.testing.assert_allclose(rotation.bounding_size(size, 0.0), size)
