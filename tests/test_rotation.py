@@ -108,8 +108,10 @@ def test_turned_views_are_the_warps_of_the_whole_image():
     )
     differing = 0
     pixels = 0
-    for _ in range(60):
+    beyond = [(300.0, 500.0), (-80.0, 160.0), (120.0, -90.5), (-50.0, -50.0)]  # off the image
+    for index in range(64):
         position = (float(rng.integers(1, 241)), float(rng.integers(1, 321)) + 0.5)
+        position = beyond[index] if index < len(beyond) else position
         angle = float(rng.uniform(-180.0, 180.0))
         size_hw = (int(rng.integers(5, 90)), int(rng.integers(5, 90)))
         view, local = rotation.upright_view(image, position, angle, size_hw)

@@ -63,7 +63,8 @@ def _footprint(
     """The rows and columns of an image that a warp by the inverse map `matrix` to `size_hw`
     reads: the bound of the output's corners mapped into it, a pixel beyond for the bilinear
     weights, cut to the image (where the cut falls on the image's edge, the replicated edge
-    is the image's own)."""
+    is the image's own). Never empty: a view wholly beyond the image (a tracker's position may
+    leave it) reads the image's nearest edge rows or columns, all that replication gives."""
     rows, cols = size_hw
     corners = np.array([[0.0, 0.0, cols - 1.0, cols - 1.0], [0.0, rows - 1.0, 0.0, rows - 1.0]])
     x, y = matrix[:, :2] @ corners + matrix[:, 2:]
